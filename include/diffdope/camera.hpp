@@ -1,0 +1,38 @@
+#pragma once
+// Pinhole camera. Units: pixels. Integer pixel coordinates are pixel centres (OpenCV convention); the image
+// spans [-0.5, width - 0.5] x [-0.5, height - 0.5]. Frame: OpenCV optical (x right, y down, z forward).
+#include <Eigen/Core>
+#include <string>
+
+#include "diffdope/kernels/projection.hpp"
+
+namespace diffdope {
+
+struct Camera {
+  double fx = 0, fy = 0;  // focal lengths, pixels
+  double cx = 0, cy = 0;  // principal point, pixels
+  int width = 0, height = 0;
+
+  Camera() = default;
+  Camera(double fx_, double fy_, double cx_, double cy_, int w, int h)
+      : fx(fx_), fy(fy_), cx(cx_), cy(cy_), width(w), height(h) {}
+
+  /// The camera of the same view resized by `scale` (e.g. 0.5): size rounded, intrinsics scaled exactly to the
+  /// resulting size, keeping pixel centres consistent (u' + 0.5 = (u + 0.5) * sx).
+  Camera scaled(double scale) const;
+  /// The camera of the same view resized to width x height.
+  Camera resized(int new_width, int new_height) const;
+
+  /// 3x3 intrinsic matrix K.
+  Eigen::Matrix3d K() const;
+  /// Throws std::invalid_argument with the reason when intrinsics or size are unusable.
+  void validate() const;
+  bool valid() const;
+
+  Intrinsics intrinsics() const {
+    return {static_cast<float>(fx), static_cast<float>(fy), static_cast<float>(cx), static_cast<float>(cy),
+            width, height};
+  }
+};
+
+}  // namespace diffdope

@@ -1,0 +1,75 @@
+#pragma once
+// Triangle coverage, depth and perspective-correct barycentrics, with their backward passes.
+#include "diffdope/kernels/vec.hpp"
+
+namespace diffdope {
+
+/// Edge function of directed edge a->b at point p: (b - a) x (p - a). Linear in p; zero on the edge line.
+DD_HOST_DEVICE float edge_function(Vec2f a, Vec2f b, Vec2f p) { return cross2(b - a, p - a); }
+
+/// Gradients of edge_function w.r.t. a and b (p held fixed).
+DD_HOST_DEVICE void edge_function_grad(Vec2f a, Vec2f b, Vec2f p, Vec2f* d_a, Vec2f* d_b) {
+  *d_a = {b.y - p.y, p.x - b.x};
+  *d_b = {p.y - a.y, a.x - p.x};
+}
+
+/// Top-left fill rule for pixel centres exactly on an edge, so that triangles sharing an edge never both
+/// (or neither) cover a pixel. `orient` is the sign of the triangle's signed area.
+DD_HOST_DEVICE bool edge_is_top_left(Vec2f a, Vec2f b, float orient) {
+  const Vec2f e = orient * (b - a);
+  return (e.y == 0.f && e.x > 0.f) || e.y < 0.f;
+}
+
+/// Perspective-correct barycentrics of the intersection of viewing ray d with the camera-space triangle
+/// (X0, X1, X2). c_i = d . (X_j x X_k) is proportional to the volume spanned by d and the opposite edge,
+/// so b_i = c_i / sum(c) are exactly the 3-D barycentrics of the hit point. Returns sum(c) (0: edge-on).
+DD_HOST_DEVICE float ray_barycentrics(Vec3f d, Vec3f X0, Vec3f X1, Vec3f X2, float b[3]) {
+  const float c0 = dot(d, cross(X1, X2));
+  const float c1 = dot(d, cross(X2, X0));
+  const float c2 = dot(d, cross(X0, X1));
+  const float s = c0 + c1 + c2;
+  if (s == 0.f) {
+    b[0] = b[1] = b[2] = 1.f / 3.f;
+    return 0.f;
+  }
+  const float is = 1.f / s;
+  b[0] = c0 * is;
+  b[1] = c1 * is;
+  b[2] = c2 * is;
+  return s;
+}
+
+/// Backward of ray_barycentrics: given dL/db (g_b) and the forward's b and s, adds dL/dX_i into g_X[i].
+DD_HOST_DEVICE void ray_barycentrics_backward(Vec3f d, const Vec3f X[3], const float b[3], float s,
+                                              const float g_b[3], Vec3f g_X[3]) {
+  if (s == 0.f) return;
+  // b_i = c_i / S  =>  dL/dc_i = (g_b_i - sum_m g_b_m b_m) / S
+  const float mean = g_b[0] * b[0] + g_b[1] * b[1] + g_b[2] * b[2];
+  const float is = 1.f / s;
+  for (int i = 0; i < 3; ++i) {
+    const float gc = (g_b[i] - mean) * is;
+    const int j = (i + 1) % 3, k = (i + 2) % 3;
+    // c_i = d . (X_j x X_k) = X_j . (X_k x d) = X_k . (d x X_j)
+    g_X[j] += gc * cross(X[k], d);
+    g_X[k] += gc * cross(d, X[j]);
+  }
+}
+
+/// Clamps barycentrics to the triangle (negative weights to 0, renormalised): the nearest-edge continuation
+/// used when a triangle's surface is evaluated just outside it. Returns false if nothing remains.
+DD_HOST_DEVICE bool clamp_barycentrics(const float b[3], float out[3]) {
+  const float p0 = b[0] > 0.f ? b[0] : 0.f, p1 = b[1] > 0.f ? b[1] : 0.f, p2 = b[2] > 0.f ? b[2] : 0.f;
+  const float sum = p0 + p1 + p2;
+  if (!(sum > 0.f)) return false;
+  out[0] = p0 / sum, out[1] = p1 / sum, out[2] = p2 / sum;
+  return true;
+}
+
+/// Backward of clamp_barycentrics: turns dL/d(clamped) into dL/d(raw), in place.
+DD_HOST_DEVICE void clamp_barycentrics_backward(const float b[3], const float clamped[3], float g[3]) {
+  const float sum = (b[0] > 0.f ? b[0] : 0.f) + (b[1] > 0.f ? b[1] : 0.f) + (b[2] > 0.f ? b[2] : 0.f);
+  const float mean = g[0] * clamped[0] + g[1] * clamped[1] + g[2] * clamped[2];
+  for (int i = 0; i < 3; ++i) g[i] = b[i] > 0.f ? (g[i] - mean) / sum : 0.f;
+}
+
+}  // namespace diffdope

@@ -1,0 +1,71 @@
+#pragma once
+// Per-pixel shading (colour and depth of a triangle's surface at a pixel centre) and its backward pass to the
+// 6-D pose gradient. `clamp` evaluates the surface at the nearest point of the triangle when the pixel centre
+// lies outside it (used by the discontinuity blends).
+#include "diffdope/kernels/mesh_view.hpp"
+#include "diffdope/kernels/projection.hpp"
+#include "diffdope/kernels/raster.hpp"
+
+namespace diffdope {
+
+namespace detail {
+/// Barycentrics used for shading (raw or clamped) plus what the backward pass needs.
+struct ShadeBary {
+  float raw[3], b[3], s;
+  bool clamped;
+};
+DD_HOST_DEVICE ShadeBary shade_barycentrics(Vec3f d, const Vec3f X[3], bool clamp) {
+  ShadeBary r;
+  r.s = ray_barycentrics(d, X[0], X[1], X[2], r.raw);
+  r.clamped = clamp && (r.raw[0] < 0.f || r.raw[1] < 0.f || r.raw[2] < 0.f) && clamp_barycentrics(r.raw, r.b);
+  if (!r.clamped) r.b[0] = r.raw[0], r.b[1] = r.raw[1], r.b[2] = r.raw[2];
+  return r;
+}
+}  // namespace detail
+
+/// Colour and camera-space depth of triangle `tri` seen through pixel centre (px, py).
+DD_HOST_DEVICE void shade_pixel(const MeshView& M, const ProjectedView& G, const Intrinsics& K, int tri, float px,
+                                float py, Vec3f* colour, float* depth, bool clamp = false) {
+  const int* v = M.triangles + 3 * tri;
+  const Vec3f X[3] = {G.cam[v[0]], G.cam[v[1]], G.cam[v[2]]};
+  const detail::ShadeBary sb = detail::shade_barycentrics(pixel_ray(K, px, py), X, clamp);
+  const float* b = sb.b;
+  *depth = b[0] * X[0].z + b[1] * X[1].z + b[2] * X[2].z;
+  const int tex = M.tri_texture[tri];
+  if (tex >= 0 && M.uvs) {
+    const Vec2f uv = b[0] * M.uvs[v[0]] + b[1] * M.uvs[v[1]] + b[2] * M.uvs[v[2]];
+    *colour = sample_bilinear(M.textures[tex], uv, nullptr, nullptr);
+  } else {
+    *colour = b[0] * M.colors[v[0]] + b[1] * M.colors[v[1]] + b[2] * M.colors[v[2]];
+  }
+}
+
+/// Backward of shade_pixel: given dL/dcolour and dL/ddepth, accumulates dL/d(pose update) into grad6.
+template <typename Acc>
+DD_HOST_DEVICE void shade_pixel_backward(const MeshView& M, const ProjectedView& G, const Intrinsics& K, int tri,
+                                         float px, float py, Vec3f g_colour, float g_depth, Acc* grad6,
+                                         bool clamp = false) {
+  const int* v = M.triangles + 3 * tri;
+  const Vec3f X[3] = {G.cam[v[0]], G.cam[v[1]], G.cam[v[2]]};
+  const Vec3f d = pixel_ray(K, px, py);
+  const detail::ShadeBary sb = detail::shade_barycentrics(d, X, clamp);
+  if (sb.s == 0.f) return;
+  const float* b = sb.b;
+  float g_b[3];
+  Vec3f g_X[3] = {{0.f, 0.f, g_depth * b[0]}, {0.f, 0.f, g_depth * b[1]}, {0.f, 0.f, g_depth * b[2]}};
+  const int tex = M.tri_texture[tri];
+  if (tex >= 0 && M.uvs) {
+    const Vec2f uv = b[0] * M.uvs[v[0]] + b[1] * M.uvs[v[1]] + b[2] * M.uvs[v[2]];
+    Vec3f dcdu, dcdv;
+    sample_bilinear(M.textures[tex], uv, &dcdu, &dcdv);
+    const float gu = dot(g_colour, dcdu), gv = dot(g_colour, dcdv);
+    for (int i = 0; i < 3; ++i) g_b[i] = gu * M.uvs[v[i]].x + gv * M.uvs[v[i]].y + g_depth * X[i].z;
+  } else {
+    for (int i = 0; i < 3; ++i) g_b[i] = dot(g_colour, M.colors[v[i]]) + g_depth * X[i].z;
+  }
+  if (sb.clamped) clamp_barycentrics_backward(sb.raw, sb.b, g_b);
+  ray_barycentrics_backward(d, X, sb.raw, sb.s, g_b, g_X);
+  for (int i = 0; i < 3; ++i) accumulate_pose_gradient(X[i], g_X[i], grad6);
+}
+
+}  // namespace diffdope

@@ -1,0 +1,46 @@
+#pragma once
+// Bilinear texture lookup with its derivative w.r.t. the UV coordinate.
+// UV convention as in PLY/OBJ/OpenGL (and assimp's output): u to the right, v up, (0,0) = bottom-left of the
+// image; texel centres sit at half-integers. Addressing clamps to the edge.
+#include "diffdope/kernels/vec.hpp"
+
+namespace diffdope {
+
+/// Read-only view of an RGB float texture, row 0 = top image row, 3 floats per texel in [0, 1].
+struct TextureView {
+  const float* rgb;
+  int width, height;
+};
+
+/// Samples tex at uv. If d_du / d_dv are non-null they receive d(colour)/du and d(colour)/dv.
+DD_HOST_DEVICE Vec3f sample_bilinear(const TextureView& tex, Vec2f uv, Vec3f* d_du, Vec3f* d_dv) {
+  const float x = uv.x * tex.width - 0.5f;
+  const float y = (1.f - uv.y) * tex.height - 0.5f;
+  const float xf = floorf(x), yf = floorf(y);
+  const float fx = x - xf, fy = y - yf;
+  const int x0i = static_cast<int>(xf), y0i = static_cast<int>(yf);
+  const int x0 = x0i < 0 ? 0 : (x0i >= tex.width ? tex.width - 1 : x0i);
+  const int x1 = x0i + 1 < 0 ? 0 : (x0i + 1 >= tex.width ? tex.width - 1 : x0i + 1);
+  const int y0 = y0i < 0 ? 0 : (y0i >= tex.height ? tex.height - 1 : y0i);
+  const int y1 = y0i + 1 < 0 ? 0 : (y0i + 1 >= tex.height ? tex.height - 1 : y0i + 1);
+  const float* p00 = tex.rgb + 3 * (y0 * tex.width + x0);
+  const float* p01 = tex.rgb + 3 * (y0 * tex.width + x1);
+  const float* p10 = tex.rgb + 3 * (y1 * tex.width + x0);
+  const float* p11 = tex.rgb + 3 * (y1 * tex.width + x1);
+  float c[3], gx[3], gy[3];
+  for (int ch = 0; ch < 3; ++ch) {
+    const float top = p00[ch] + fx * (p01[ch] - p00[ch]);
+    const float bot = p10[ch] + fx * (p11[ch] - p10[ch]);
+    c[ch] = top + fy * (bot - top);
+    gx[ch] = (1.f - fy) * (p01[ch] - p00[ch]) + fy * (p11[ch] - p10[ch]);
+    gy[ch] = bot - top;
+  }
+  // Clamped addressing is flat outside the texture: no derivative there.
+  const float sx = (x0i < 0 || x0i + 1 >= tex.width) ? 0.f : 1.f;
+  const float sy = (y0i < 0 || y0i + 1 >= tex.height) ? 0.f : 1.f;
+  if (d_du) *d_du = {sx * gx[0] * tex.width, sx * gx[1] * tex.width, sx * gx[2] * tex.width};
+  if (d_dv) *d_dv = {-sy * gy[0] * tex.height, -sy * gy[1] * tex.height, -sy * gy[2] * tex.height};
+  return {c[0], c[1], c[2]};
+}
+
+}  // namespace diffdope

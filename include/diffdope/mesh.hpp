@@ -1,0 +1,74 @@
+#pragma once
+// Triangle mesh in metres (model frame), with what the renderer needs: UVs + textures or vertex colours, and an
+// edge adjacency built on welded positions so that vertices duplicated at UV seams do not look like borders.
+#include <Eigen/Core>
+#include <string>
+#include <vector>
+
+#include "diffdope/kernels/mesh_view.hpp"
+
+namespace diffdope {
+
+/// RGB texture, float in [0, 1], row 0 = top image row.
+struct Texture {
+  int width = 0, height = 0;
+  std::vector<float> rgb;  // 3 * width * height
+  std::string source;      // file it came from, for messages
+};
+
+struct MeshLoadOptions {
+  /// Metres per model unit (0.001 for BOP's millimetre models).
+  double scale = 1.0;
+  /// Colour used when the model has neither texture nor vertex colours, RGB in [0, 1].
+  Eigen::Vector3f default_color{0.7f, 0.7f, 0.7f};
+};
+
+class Mesh {
+ public:
+  std::vector<Vec3f> positions;  // metres, model frame
+  std::vector<Vec2f> uvs;        // per vertex; empty when the model has none
+  std::vector<Vec3f> colors;     // per vertex RGB in [0, 1]; always filled (material or default colour)
+  std::vector<int> triangles;    // 3 vertex indices per triangle
+  std::vector<int> tri_texture;  // per triangle: index into textures, or -1 for vertex colours
+  std::vector<Texture> textures;
+  std::string name;              // file name or generator name, for messages
+
+  /// Loads PLY (incl. `comment TextureFile`), OBJ+MTL, glTF/GLB and whatever else assimp reads.
+  /// Throws std::runtime_error naming the file and the problem (missing file, missing texture, no triangles).
+  static Mesh load(const std::string& path, const MeshLoadOptions& options = {});
+
+  /// Checks consistency, drops nothing silently, computes bounds and adjacency. Call after filling by hand.
+  /// Throws std::runtime_error when the mesh is empty or indices are out of range.
+  void finalize();
+
+  int num_vertices() const { return static_cast<int>(positions.size()); }
+  int num_triangles() const { return static_cast<int>(triangles.size() / 3); }
+  bool has_texture() const { return !textures.empty(); }
+
+  // Geometry summaries (valid after finalize()).
+  Eigen::Vector3d bbox_min() const { return bbox_min_; }
+  Eigen::Vector3d bbox_max() const { return bbox_max_; }
+  Eigen::Vector3d center() const { return 0.5 * (bbox_min_ + bbox_max_); }  // bounding-box centre
+  double diameter() const { return diameter_; }  // largest distance between two vertices, metres
+  /// The 8 corners of the bounding box.
+  std::vector<Eigen::Vector3d> bbox_corners() const;
+
+  /// Per triangle edge k (v_k -> v_k+1): the triangle across it, or -1 at a border / non-manifold edge.
+  const std::vector<int>& neighbors() const { return neighbors_; }
+  /// Per triangle edge k: the vertex of the neighbour opposite that edge (valid where neighbors() >= 0).
+  const std::vector<int>& opposite_vertices() const { return opposite_; }
+  /// Per triangle edge k: 1 where texture, UVs or colours are discontinuous across it (a colour seam).
+  const std::vector<unsigned char>& seams() const { return seams_; }
+
+  /// Kernel view over host memory; valid while this mesh and `texture_storage` live and are not modified.
+  MeshView view(std::vector<TextureView>& texture_storage) const;
+
+ private:
+  void build_adjacency();
+  Eigen::Vector3d bbox_min_ = Eigen::Vector3d::Zero(), bbox_max_ = Eigen::Vector3d::Zero();
+  double diameter_ = 0;
+  std::vector<int> neighbors_, opposite_;
+  std::vector<unsigned char> seams_;
+};
+
+}  // namespace diffdope

@@ -1,0 +1,35 @@
+#pragma once
+// What the camera saw, converted to the refiner's units. All images share the camera's size.
+#include <opencv2/core.hpp>
+#include <string>
+
+#include "diffdope/camera.hpp"
+
+namespace diffdope {
+
+struct Observation {
+  cv::Mat rgb;    // CV_32FC3, RGB order, [0, 1]; empty = no colour
+  cv::Mat depth;  // CV_32FC1, metres; 0 or NaN = no reading; empty = no depth
+  cv::Mat mask;   // CV_32FC1, object weight S in [0, 1] (0/1 for a binary mask); empty = no mask
+
+  bool has_rgb() const { return !rgb.empty(); }
+  bool has_depth() const { return !depth.empty(); }
+  bool has_mask() const { return !mask.empty(); }
+
+  /// Throws std::invalid_argument naming the image and the problem (type, size mismatch with the camera).
+  void validate(const Camera& camera) const;
+
+  /// Resized copy for a camera scaled by `scale`: colour area-averaged, depth and mask nearest (no mixing of
+  /// depths across edges).
+  Observation resized(const Camera& scaled_camera) const;
+};
+
+/// Converts a colour image: 8UC3 / 16UC3 / 32FC3 (assumed RGB unless `bgr`), 8UC1 / 32FC1 grey.
+cv::Mat to_rgb_float(const cv::Mat& image, bool bgr, const std::string& what = "rgb");
+/// Converts depth: 16UC1 (units of `metres_per_unit`, e.g. 0.001 for millimetres) or 32FC1 (metres, scaled
+/// by metres_per_unit too). Non-positive and non-finite readings become 0 (no reading).
+cv::Mat to_depth_metres(const cv::Mat& depth, double metres_per_unit, const std::string& what = "depth");
+/// Converts a mask: 8U/16U (nonzero = object) or 32F (clamped to [0, 1]).
+cv::Mat to_mask_float(const cv::Mat& mask, const std::string& what = "mask");
+
+}  // namespace diffdope

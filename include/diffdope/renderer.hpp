@@ -1,0 +1,83 @@
+#pragma once
+// The differentiable renderer: a backend interface (CPU now, CUDA later) that renders B hypotheses (poses) of
+// one mesh and evaluates the loss against an observation, with its gradient w.r.t. each pose's 6-D update.
+#include <memory>
+#include <opencv2/core.hpp>
+#include <string>
+#include <vector>
+
+#include "diffdope/camera.hpp"
+#include "diffdope/mesh.hpp"
+#include "diffdope/observation.hpp"
+#include "diffdope/pose.hpp"
+
+namespace diffdope {
+
+struct RenderOptions {
+  /// Skip triangles facing away from the camera. Faster for closed meshes; keep off for open ones.
+  bool cull_back_faces = false;
+  /// Triangles with a vertex closer than this (metres) are not drawn.
+  double near_plane = 0.01;
+  /// Pixels added around the region of interest (projected model box union observed mask). >= 1 so that
+  /// silhouette blends of border pixels are inside.
+  int roi_margin = 2;
+  /// false: work on the full frame (results are identical; for tests and debugging).
+  bool use_roi = true;
+  /// Worker threads (CPU backend); 0 = all hardware threads.
+  int threads = 0;
+};
+
+/// Loss weights and robustness constants. Each term is a mean, so values (and gradients, per metre/radian) do
+/// not depend on the image resolution:
+///   rgb   = mean over S of  cov*|I_c - R_c|_1/3 + (1 - cov)*rgb_miss            (colours in [0, 1])
+///   depth = mean over S with a depth reading of  cov*min(|I_d - R_d|, tau)/tau + (1 - cov)   (tau = depth_truncation)
+///   mask  = sum over pixels of |S - cov| / sum(S)   (mismatched area as a fraction of the object's area)
+/// where S is the observed mask (all ones when absent) and cov the antialiased coverage of the render.
+struct LossOptions {
+  double weight_rgb = 1.0;
+  double weight_depth = 1.0;
+  double weight_mask = 1.0;
+  double rgb_miss = 0.5;          // cost of an observed object pixel the render misses (colour term)
+  double depth_truncation = 0.05; // metres; larger depth errors (noise, occluders) count as tau
+};
+
+/// One hypothesis' loss: per-term means (unweighted), the weighted total, and d(total)/d(delta).
+struct LossValue {
+  double rgb = 0, depth = 0, mask = 0;
+  double total = 0;
+  Vector6d gradient = Vector6d::Zero();  // [0..2] per metre of translation, [3..5] per radian (see pose.hpp)
+};
+
+/// Full-frame render of one hypothesis (zero outside `roi`).
+struct RenderImage {
+  cv::Rect roi;       // region that was rendered
+  cv::Mat color;      // CV_32FC3 RGB, premultiplied by coverage (i.e. over black)
+  cv::Mat depth;      // CV_32FC1 metres, camera z of the visible surface; 0 where not covered
+  cv::Mat coverage;   // CV_32FC1 in [0, 1], antialiased at silhouettes
+  cv::Mat triangle;   // CV_32SC1 visible triangle index, -1 where not covered
+};
+
+class Renderer {
+ public:
+  virtual ~Renderer() = default;
+  virtual std::string name() const = 0;
+  const RenderOptions& options() const { return options_; }
+
+  /// Renders each pose. `observed_mask` (optional, CV_32F) widens the region of interest as in evaluate().
+  virtual std::vector<RenderImage> render(const Camera& camera, const Mesh& mesh, const std::vector<Pose>& poses,
+                                          const cv::Mat& observed_mask = cv::Mat()) = 0;
+
+  /// Loss of each pose against `observed` (and gradients when `with_gradient`). `out` is resized to poses.size().
+  virtual void evaluate(const Camera& camera, const Mesh& mesh, const Observation& observed,
+                        const std::vector<Pose>& poses, const LossOptions& loss, bool with_gradient,
+                        std::vector<LossValue>& out) = 0;
+
+ protected:
+  explicit Renderer(const RenderOptions& options) : options_(options) {}
+  RenderOptions options_;
+};
+
+/// The multithreaded CPU backend.
+std::unique_ptr<Renderer> make_cpu_renderer(const RenderOptions& options = {});
+
+}  // namespace diffdope

@@ -1,0 +1,40 @@
+#include "diffdope/camera.hpp"
+
+#include <cmath>
+#include <stdexcept>
+
+namespace diffdope {
+
+Camera Camera::resized(int new_width, int new_height) const {
+  const double sx = static_cast<double>(new_width) / width;
+  const double sy = static_cast<double>(new_height) / height;
+  return Camera(fx * sx, fy * sy, (cx + 0.5) * sx - 0.5, (cy + 0.5) * sy - 0.5, new_width, new_height);
+}
+
+Camera Camera::scaled(double scale) const {
+  if (!(scale > 0)) throw std::invalid_argument("Camera::scaled: scale must be > 0");
+  const int w = std::max(1, static_cast<int>(std::lround(width * scale)));
+  const int h = std::max(1, static_cast<int>(std::lround(height * scale)));
+  return resized(w, h);
+}
+
+Eigen::Matrix3d Camera::K() const {
+  Eigen::Matrix3d k;
+  k << fx, 0, cx, 0, fy, cy, 0, 0, 1;
+  return k;
+}
+
+bool Camera::valid() const {
+  return std::isfinite(fx) && std::isfinite(fy) && std::isfinite(cx) && std::isfinite(cy) && fx > 0 && fy > 0 &&
+         width > 0 && height > 0;
+}
+
+void Camera::validate() const {
+  if (!valid())
+    throw std::invalid_argument("camera: unusable intrinsics (fx=" + std::to_string(fx) + ", fy=" +
+                                std::to_string(fy) + ", cx=" + std::to_string(cx) + ", cy=" + std::to_string(cy) +
+                                ", " + std::to_string(width) + "x" + std::to_string(height) +
+                                "): focal lengths and size must be positive and finite");
+}
+
+}  // namespace diffdope

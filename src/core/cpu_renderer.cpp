@@ -1,0 +1,352 @@
+// CPU backend of the differentiable renderer: loops over hypotheses (one per worker thread at a time) and over
+// the pixels of each hypothesis' region of interest, calling the shared kernels/ maths. Stages per hypothesis:
+//   vertices -> triangles -> z-buffer raster -> shading -> silhouette blends -> loss -> backward.
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <opencv2/imgproc.hpp>
+#include <stdexcept>
+
+#include "diffdope/kernels/pixel_loss.hpp"
+#include "diffdope/kernels/shade.hpp"
+#include "diffdope/kernels/silhouette.hpp"
+#include "diffdope/kernels/vertex_stage.hpp"
+#include "diffdope/renderer.hpp"
+#include "diffdope/thread_pool.hpp"
+
+namespace diffdope {
+namespace {
+
+/// Pixel rectangle [x0, x1) x [y0, y1).
+struct Rect {
+  int x0 = 0, y0 = 0, x1 = 0, y1 = 0;
+  int width() const { return x1 - x0; }
+  int height() const { return y1 - y0; }
+  bool empty() const { return x1 <= x0 || y1 <= y0; }
+};
+
+Rect unite(const Rect& a, const Rect& b) {
+  if (a.empty()) return b;
+  if (b.empty()) return a;
+  return {std::min(a.x0, b.x0), std::min(a.y0, b.y0), std::max(a.x1, b.x1), std::max(a.y1, b.y1)};
+}
+
+/// Scratch memory of one worker; reused across hypotheses and calls (no per-iteration allocation).
+struct Workspace {
+  std::vector<Vec3f> cam;
+  std::vector<Vec2f> pix;
+  std::vector<float> tri_area;
+  std::vector<float> zbuf;
+  std::vector<int> tri;
+  std::vector<PixelAttr> pre, post, g_pre, g_post;
+  std::vector<BlendEvent> events;
+};
+
+/// What every hypothesis of one call shares.
+struct CallContext {
+  MeshView mesh;
+  Intrinsics K;
+  float near_z = 0.01f;
+  bool cull = false;
+  Rect mask_box;    // bounding box of S > 0 (whole image when S is implicit all-ones)
+  bool use_roi = true;
+  int margin = 2;
+  std::vector<Eigen::Vector3d> bbox_corners;
+};
+
+class CpuRenderer final : public Renderer {
+ public:
+  explicit CpuRenderer(const RenderOptions& options) : Renderer(options), pool_(options.threads) {
+    workspaces_.resize(pool_.size());
+  }
+  std::string name() const override { return "cpu"; }
+
+  std::vector<RenderImage> render(const Camera& camera, const Mesh& mesh, const std::vector<Pose>& poses,
+                                  const cv::Mat& observed_mask) override;
+  void evaluate(const Camera& camera, const Mesh& mesh, const Observation& observed, const std::vector<Pose>& poses,
+                const LossOptions& loss, bool with_gradient, std::vector<LossValue>& out) override;
+
+ private:
+  /// `mask` widens the region of interest; when empty, `no_mask_means_everywhere` says whether S is then
+  /// implicitly 1 on the whole image (loss evaluation) or absent (plain rendering).
+  CallContext make_context(const Camera& camera, const Mesh& mesh, const cv::Mat& mask, bool no_mask_means_everywhere);
+  /// Vertex, triangle, raster, shading and blend stages. Returns the region that was rendered.
+  Rect rasterize(const CallContext& ctx, const Pose& pose, Workspace& ws, bool keep_events) const;
+
+  ThreadPool pool_;
+  std::vector<Workspace> workspaces_;
+  std::vector<TextureView> texture_views_;
+};
+
+CallContext CpuRenderer::make_context(const Camera& camera, const Mesh& mesh, const cv::Mat& mask,
+                                      bool no_mask_means_everywhere) {
+  camera.validate();
+  if (mesh.num_triangles() == 0 || mesh.neighbors().size() != mesh.triangles.size())
+    throw std::invalid_argument("renderer: mesh '" + mesh.name + "' is empty or not finalized");
+  CallContext ctx;
+  ctx.mesh = mesh.view(texture_views_);
+  ctx.K = camera.intrinsics();
+  ctx.near_z = static_cast<float>(options_.near_plane);
+  ctx.cull = options_.cull_back_faces;
+  ctx.use_roi = options_.use_roi;
+  ctx.margin = std::max(1, options_.roi_margin);
+  ctx.bbox_corners = mesh.bbox_corners();
+  if (mask.empty()) {
+    if (no_mask_means_everywhere) ctx.mask_box = {0, 0, camera.width, camera.height};  // S = 1 everywhere
+  } else {
+    cv::Mat nz;
+    cv::compare(mask, 0.0, nz, cv::CMP_GT);
+    const cv::Rect r = cv::boundingRect(nz);
+    ctx.mask_box = {r.x, r.y, r.x + r.width, r.y + r.height};
+  }
+  return ctx;
+}
+
+Rect CpuRenderer::rasterize(const CallContext& ctx, const Pose& pose, Workspace& ws, bool keep_events) const {
+  const MeshView& M = ctx.mesh;
+  const Intrinsics& K = ctx.K;
+  const int nv = M.num_vertices, nt = M.num_triangles;
+  const RigidTransform T = pose.to_kernel();
+
+  ws.cam.resize(nv);
+  ws.pix.resize(nv);
+  ws.tri_area.resize(nt);
+  for (int i = 0; i < nv; ++i) vertex_setup(M, T, K, ctx.near_z, i, ws.cam.data(), ws.pix.data());
+  for (int t = 0; t < nt; ++t) ws.tri_area[t] = triangle_setup(M, ws.cam.data(), ws.pix.data(), ctx.near_z, ctx.cull, t);
+  const ProjectedView G{ws.cam.data(), ws.pix.data(), ws.tri_area.data()};
+
+  // Region of interest: projected model box U observed mask box, plus margin.
+  Rect roi{0, 0, K.width, K.height};
+  if (ctx.use_roi) {
+    Rect model{0, 0, K.width, K.height};
+    double xmin = 1e30, ymin = 1e30, xmax = -1e30, ymax = -1e30;
+    bool all_front = true;
+    for (const auto& c : ctx.bbox_corners) {
+      const Eigen::Vector3d X = pose * c;
+      if (!(X.z() > ctx.near_z)) {
+        all_front = false;
+        break;
+      }
+      const double u = K.fx * X.x() / X.z() + K.cx, v = K.fy * X.y() / X.z() + K.cy;
+      xmin = std::min(xmin, u), xmax = std::max(xmax, u), ymin = std::min(ymin, v), ymax = std::max(ymax, v);
+    }
+    if (all_front) {
+      model = {static_cast<int>(std::floor(std::max(xmin, -1e6))), static_cast<int>(std::floor(std::max(ymin, -1e6))),
+               static_cast<int>(std::ceil(std::min(xmax, 1e6))) + 1, static_cast<int>(std::ceil(std::min(ymax, 1e6))) + 1};
+    }
+    roi = unite(model, ctx.mask_box);
+    roi = {std::max(0, roi.x0 - ctx.margin), std::max(0, roi.y0 - ctx.margin),
+           std::min(K.width, roi.x1 + ctx.margin), std::min(K.height, roi.y1 + ctx.margin)};
+    if (roi.empty()) roi = {0, 0, 1, 1};
+  }
+  const int W = roi.width(), H = roi.height(), N = W * H;
+  ws.zbuf.assign(N, std::numeric_limits<float>::infinity());
+  ws.tri.assign(N, -1);
+
+  // Z-buffer raster. Depth is interpolated as 1/z (linear in the image); ties keep the lower triangle index.
+  for (int t = 0; t < nt; ++t) {
+    const float area = ws.tri_area[t];
+    if (area == 0.f) continue;
+    const int* v = M.triangles + 3 * t;
+    const Vec2f s[3] = {ws.pix[v[0]], ws.pix[v[1]], ws.pix[v[2]]};
+    const float orient = area > 0.f ? 1.f : -1.f;
+    const int xs = std::max(roi.x0, static_cast<int>(std::ceil(std::min({s[0].x, s[1].x, s[2].x}))));
+    const int xe = std::min(roi.x1 - 1, static_cast<int>(std::floor(std::max({s[0].x, s[1].x, s[2].x}))));
+    const int ys = std::max(roi.y0, static_cast<int>(std::ceil(std::min({s[0].y, s[1].y, s[2].y}))));
+    const int ye = std::min(roi.y1 - 1, static_cast<int>(std::floor(std::max({s[0].y, s[1].y, s[2].y}))));
+    if (xs > xe || ys > ye) continue;
+    const float inv2a = 1.f / (2.f * std::fabs(area));
+    // Edge k (s_k -> s_k+1) weighs the opposite vertex k+2.
+    const float iz[3] = {1.f / ws.cam[v[2]].z, 1.f / ws.cam[v[0]].z, 1.f / ws.cam[v[1]].z};
+    bool top_left[3];
+    float dx[3];
+    for (int k = 0; k < 3; ++k) {
+      top_left[k] = edge_is_top_left(s[k], s[(k + 1) % 3], orient);
+      dx[k] = -orient * (s[(k + 1) % 3].y - s[k].y);  // d(edge)/dx
+    }
+    for (int y = ys; y <= ye; ++y) {
+      float e[3];
+      for (int k = 0; k < 3; ++k)
+        e[k] = orient * edge_function(s[k], s[(k + 1) % 3], Vec2f{static_cast<float>(xs), static_cast<float>(y)});
+      float* zrow = ws.zbuf.data() + (y - roi.y0) * W - roi.x0;
+      int* trow = ws.tri.data() + (y - roi.y0) * W - roi.x0;
+      for (int x = xs; x <= xe; ++x, e[0] += dx[0], e[1] += dx[1], e[2] += dx[2]) {
+        bool inside = true;
+        for (int k = 0; k < 3; ++k) inside &= e[k] > 0.f || (e[k] == 0.f && top_left[k]);
+        if (!inside) continue;
+        const float z = 1.f / ((e[0] * iz[0] + e[1] * iz[1] + e[2] * iz[2]) * inv2a);
+        if (z < zrow[x]) {
+          zrow[x] = z;
+          trow[x] = t;
+        }
+      }
+    }
+  }
+
+  // Shading (deferred: only the visible triangle of each pixel).
+  ws.pre.resize(N);
+  for (int y = roi.y0; y < roi.y1; ++y) {
+    for (int x = roi.x0; x < roi.x1; ++x) {
+      const int i = (y - roi.y0) * W + (x - roi.x0);
+      const int t = ws.tri[i];
+      PixelAttr& a = ws.pre[i];
+      if (t < 0) {
+        a = PixelAttr{0.f, {0.f, 0.f, 0.f}, 0.f};
+        continue;
+      }
+      Vec3f c;
+      float d;
+      shade_pixel(M, G, K, t, static_cast<float>(x), static_cast<float>(y), &c, &d);
+      a = PixelAttr{1.f, {c.x, c.y, c.z}, d};
+    }
+  }
+
+  // Silhouette and seam blends between horizontal and vertical neighbours.
+  ws.post = ws.pre;
+  ws.events.clear();
+  for (int y = roi.y0; y < roi.y1; ++y) {
+    for (int x = roi.x0; x < roi.x1; ++x) {
+      const int i = (y - roi.y0) * W + (x - roi.x0);
+      const Vec2f p{static_cast<float>(x), static_cast<float>(y)};
+      for (int dir = 0; dir < 2; ++dir) {
+        const bool horizontal = dir == 0;
+        if (horizontal ? x + 1 >= roi.x1 : y + 1 >= roi.y1) continue;
+        const int j = horizontal ? i + 1 : i + W;
+        if (ws.tri[i] == ws.tri[j]) continue;
+        const Vec2f q = horizontal ? Vec2f{p.x + 1.f, p.y} : Vec2f{p.x, p.y + 1.f};
+        BlendEvent ev;
+        if (!discontinuity_blend(M, G, K, i, ws.tri[i], ws.pre[i].d, p, j, ws.tri[j], ws.pre[j].d, q, horizontal,
+                                 &ev))
+          continue;
+        apply_blend(ev, ws.pre[ev.to], &ws.post[ev.to]);
+        if (keep_events) ws.events.push_back(ev);
+      }
+    }
+  }
+  return roi;
+}
+
+std::vector<RenderImage> CpuRenderer::render(const Camera& camera, const Mesh& mesh, const std::vector<Pose>& poses,
+                                             const cv::Mat& observed_mask) {
+  if (!observed_mask.empty() && (observed_mask.type() != CV_32FC1 || observed_mask.cols != camera.width ||
+                                 observed_mask.rows != camera.height))
+    throw std::invalid_argument("render: observed mask must be CV_32FC1 of the camera's size");
+  const CallContext ctx = make_context(camera, mesh, observed_mask, false);
+  std::vector<RenderImage> out(poses.size());
+  pool_.parallel_for(static_cast<int>(poses.size()), [&](int h, int worker) {
+    Workspace& ws = workspaces_[worker];
+    const Rect roi = rasterize(ctx, poses[h], ws, false);
+    RenderImage& img = out[h];
+    img.roi = cv::Rect(roi.x0, roi.y0, roi.width(), roi.height());
+    img.color = cv::Mat::zeros(camera.height, camera.width, CV_32FC3);
+    img.depth = cv::Mat::zeros(camera.height, camera.width, CV_32FC1);
+    img.coverage = cv::Mat::zeros(camera.height, camera.width, CV_32FC1);
+    img.triangle = cv::Mat(camera.height, camera.width, CV_32SC1, cv::Scalar(-1));
+    for (int y = roi.y0; y < roi.y1; ++y) {
+      for (int x = roi.x0; x < roi.x1; ++x) {
+        const int i = (y - roi.y0) * roi.width() + (x - roi.x0);
+        const PixelAttr& a = ws.post[i];
+        img.color.at<cv::Vec3f>(y, x) = cv::Vec3f(a.c[0], a.c[1], a.c[2]);
+        img.coverage.at<float>(y, x) = a.cov;
+        img.depth.at<float>(y, x) = ws.tri[i] >= 0 ? ws.pre[i].d : 0.f;
+        img.triangle.at<int>(y, x) = ws.tri[i];
+      }
+    }
+  });
+  return out;
+}
+
+void CpuRenderer::evaluate(const Camera& camera, const Mesh& mesh, const Observation& obs,
+                           const std::vector<Pose>& poses, const LossOptions& loss, bool with_gradient,
+                           std::vector<LossValue>& out) {
+  obs.validate(camera);
+  if (!(loss.depth_truncation > 0)) throw std::invalid_argument("loss: depth_truncation must be > 0");
+  const CallContext ctx = make_context(camera, mesh, obs.mask, true);
+
+  // Normalisers: each term is a mean over the pixels it is defined on (whole image, not the ROI, so that the
+  // value does not depend on the region of interest).
+  double n_rgb = 0, n_depth = 0;
+  if (obs.has_mask()) {
+    n_rgb = cv::sum(obs.mask)[0];
+    if (obs.has_depth()) {
+      cv::Mat valid;
+      cv::compare(obs.depth, 0.0, valid, cv::CMP_GT);
+      valid.convertTo(valid, CV_32F, 1.0 / 255.0);
+      n_depth = cv::sum(valid.mul(obs.mask))[0];
+    }
+  } else {
+    n_rgb = static_cast<double>(camera.width) * camera.height;
+    if (obs.has_depth()) n_depth = cv::countNonZero(obs.depth > 0);
+  }
+  PixelLossParams P;
+  P.k_rgb = (obs.has_rgb() && n_rgb > 0) ? static_cast<float>(loss.weight_rgb / n_rgb) : 0.f;
+  P.k_depth = (obs.has_depth() && n_depth > 0) ? static_cast<float>(loss.weight_depth / n_depth) : 0.f;
+  P.k_mask = (obs.has_mask() && n_rgb > 0) ? static_cast<float>(loss.weight_mask / n_rgb) : 0.f;
+  P.rgb_miss = static_cast<float>(loss.rgb_miss);
+  P.depth_trunc = static_cast<float>(loss.depth_truncation);
+
+  out.assign(poses.size(), LossValue());
+  pool_.parallel_for(static_cast<int>(poses.size()), [&](int h, int worker) {
+    Workspace& ws = workspaces_[worker];
+    LossValue& res = out[h];
+    if (!poses[h].is_valid(1e-3)) {
+      res.rgb = res.depth = res.mask = res.total = std::numeric_limits<double>::infinity();
+      return;  // a NaN or non-rotation pose gets an infinite loss, never a gradient
+    }
+    const Rect roi = rasterize(ctx, poses[h], ws, with_gradient);
+    const ProjectedView G{ws.cam.data(), ws.pix.data(), ws.tri_area.data()};
+    const int W = roi.width(), N = W * roi.height();
+    if (with_gradient) ws.g_post.resize(N);
+    double sum_rgb = 0, sum_depth = 0, sum_mask = 0;
+    static const float kZero3[3] = {0.f, 0.f, 0.f};
+    for (int y = roi.y0; y < roi.y1; ++y) {
+      const float* mrow = obs.has_mask() ? obs.mask.ptr<float>(y) : nullptr;
+      const float* crow = obs.has_rgb() ? obs.rgb.ptr<float>(y) : nullptr;
+      const float* drow = obs.has_depth() ? obs.depth.ptr<float>(y) : nullptr;
+      for (int x = roi.x0; x < roi.x1; ++x) {
+        const int i = (y - roi.y0) * W + (x - roi.x0);
+        const float S = mrow ? mrow[x] : 1.f;
+        const float* I = crow ? crow + 3 * x : kZero3;
+        const float Id = drow ? drow[x] : 0.f;
+        const bool valid = Id > 0.f;  // to_depth_metres maps NaN / negative to 0
+        const PixelAttr& a = ws.post[i];
+        PixelLossGrad g;
+        const PixelLossValue v = pixel_loss(P, S, I, Id, valid, a.cov, a.c, a.d, with_gradient ? &g : nullptr);
+        sum_rgb += v.rgb;
+        sum_depth += v.depth;
+        sum_mask += v.mask;
+        if (with_gradient) ws.g_post[i] = PixelAttr{g.cov, {g.c[0], g.c[1], g.c[2]}, g.d};
+      }
+    }
+    res.rgb = n_rgb > 0 && obs.has_rgb() ? sum_rgb / n_rgb : 0.0;
+    res.depth = n_depth > 0 ? sum_depth / n_depth : 0.0;
+    res.mask = n_rgb > 0 && obs.has_mask() ? sum_mask / n_rgb : 0.0;
+    res.total = P.k_rgb * sum_rgb + P.k_depth * sum_depth + P.k_mask * sum_mask;
+    if (!with_gradient) return;
+
+    double grad[6] = {0, 0, 0, 0, 0, 0};
+    ws.g_pre = ws.g_post;
+    for (const BlendEvent& e : ws.events)
+      blend_backward(ctx.mesh, G, ctx.K, e, ws.pre[e.to], ws.g_post[e.to], &ws.g_pre[e.to], grad);
+    for (int y = roi.y0; y < roi.y1; ++y) {
+      for (int x = roi.x0; x < roi.x1; ++x) {
+        const int i = (y - roi.y0) * W + (x - roi.x0);
+        const int t = ws.tri[i];
+        if (t < 0) continue;
+        const PixelAttr& g = ws.g_pre[i];
+        if (g.c[0] == 0.f && g.c[1] == 0.f && g.c[2] == 0.f && g.d == 0.f) continue;
+        shade_pixel_backward(ctx.mesh, G, ctx.K, t, static_cast<float>(x), static_cast<float>(y),
+                             Vec3f{g.c[0], g.c[1], g.c[2]}, g.d, grad);
+      }
+    }
+    for (int k = 0; k < 6; ++k) res.gradient[k] = grad[k];
+  });
+}
+
+}  // namespace
+
+std::unique_ptr<Renderer> make_cpu_renderer(const RenderOptions& options) {
+  return std::make_unique<CpuRenderer>(options);
+}
+
+}  // namespace diffdope

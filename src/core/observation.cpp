@@ -1,0 +1,116 @@
+#include "diffdope/observation.hpp"
+
+#include <cmath>
+#include <opencv2/imgproc.hpp>
+#include <stdexcept>
+
+namespace diffdope {
+namespace {
+
+std::string type_name(const cv::Mat& m) {
+  return cv::typeToString(m.type());
+}
+
+void check_size(const cv::Mat& m, const Camera& camera, const std::string& what) {
+  if (m.empty()) return;
+  if (m.cols != camera.width || m.rows != camera.height)
+    throw std::invalid_argument(what + ": image is " + std::to_string(m.cols) + "x" + std::to_string(m.rows) +
+                                " but the camera is " + std::to_string(camera.width) + "x" +
+                                std::to_string(camera.height));
+}
+
+}  // namespace
+
+void Observation::validate(const Camera& camera) const {
+  camera.validate();
+  if (has_rgb() && rgb.type() != CV_32FC3)
+    throw std::invalid_argument("rgb: expected CV_32FC3 in [0,1], got " + type_name(rgb) + " (use to_rgb_float)");
+  if (has_depth() && depth.type() != CV_32FC1)
+    throw std::invalid_argument("depth: expected CV_32FC1 metres, got " + type_name(depth) +
+                                " (use to_depth_metres)");
+  if (has_mask() && mask.type() != CV_32FC1)
+    throw std::invalid_argument("mask: expected CV_32FC1 in [0,1], got " + type_name(mask) + " (use to_mask_float)");
+  check_size(rgb, camera, "rgb");
+  check_size(depth, camera, "depth");
+  check_size(mask, camera, "mask");
+  for (const cv::Mat* m : {&rgb, &depth, &mask})
+    if (!m->empty() && !m->isContinuous())
+      throw std::invalid_argument("observation images must be continuous in memory (clone() a sub-image)");
+}
+
+Observation Observation::resized(const Camera& cam) const {
+  Observation out;
+  const cv::Size size(cam.width, cam.height);
+  if (has_rgb()) cv::resize(rgb, out.rgb, size, 0, 0, cv::INTER_AREA);
+  if (has_depth()) cv::resize(depth, out.depth, size, 0, 0, cv::INTER_NEAREST);
+  if (has_mask()) cv::resize(mask, out.mask, size, 0, 0, cv::INTER_NEAREST);
+  return out;
+}
+
+cv::Mat to_rgb_float(const cv::Mat& image, bool bgr, const std::string& what) {
+  if (image.empty()) throw std::invalid_argument(what + ": empty image");
+  cv::Mat f;
+  const int depth = image.depth();
+  double scale = 1.0;
+  if (depth == CV_8U) scale = 1.0 / 255.0;
+  else if (depth == CV_16U) scale = 1.0 / 65535.0;
+  else if (depth != CV_32F && depth != CV_64F)
+    throw std::invalid_argument(what + ": unsupported image type " + cv::typeToString(image.type()) +
+                                " (expected 8-bit, 16-bit or float)");
+  image.convertTo(f, CV_MAKETYPE(CV_32F, image.channels()), scale);
+  cv::Mat out;
+  switch (image.channels()) {
+    case 1: cv::cvtColor(f, out, cv::COLOR_GRAY2RGB); break;
+    case 3: if (bgr) cv::cvtColor(f, out, cv::COLOR_BGR2RGB); else out = f; break;
+    case 4: cv::cvtColor(f, out, bgr ? cv::COLOR_BGRA2RGB : cv::COLOR_RGBA2RGB); break;
+    default:
+      throw std::invalid_argument(what + ": unsupported channel count " + std::to_string(image.channels()));
+  }
+  return out;
+}
+
+cv::Mat to_depth_metres(const cv::Mat& depth, double metres_per_unit, const std::string& what) {
+  if (depth.empty()) throw std::invalid_argument(what + ": empty image");
+  if (depth.channels() != 1)
+    throw std::invalid_argument(what + ": expected one channel, got " + cv::typeToString(depth.type()));
+  if (!(metres_per_unit > 0)) throw std::invalid_argument(what + ": depth scale must be > 0");
+  if (depth.depth() != CV_16U && depth.depth() != CV_32F && depth.depth() != CV_64F)
+    throw std::invalid_argument(what + ": unsupported depth type " + cv::typeToString(depth.type()) +
+                                " (expected 16UC1 or 32FC1)");
+  cv::Mat out;
+  depth.convertTo(out, CV_32F, metres_per_unit);
+  for (int y = 0; y < out.rows; ++y) {
+    float* row = out.ptr<float>(y);
+    for (int x = 0; x < out.cols; ++x)
+      if (!(std::isfinite(row[x]) && row[x] > 0.f)) row[x] = 0.f;
+  }
+  return out;
+}
+
+cv::Mat to_mask_float(const cv::Mat& mask, const std::string& what) {
+  if (mask.empty()) throw std::invalid_argument(what + ": empty image");
+  cv::Mat m = mask;
+  if (m.channels() == 3 || m.channels() == 4) {
+    // Colour masks: any nonzero channel counts as object.
+    std::vector<cv::Mat> ch;
+    cv::split(m, ch);
+    m = ch[0].clone();
+    for (size_t i = 1; i < std::min<size_t>(ch.size(), 3); ++i) cv::max(m, ch[i], m);
+  } else if (m.channels() != 1) {
+    throw std::invalid_argument(what + ": unsupported channel count " + std::to_string(m.channels()));
+  }
+  cv::Mat out;
+  if (m.depth() == CV_8U || m.depth() == CV_16U || m.depth() == CV_32S) {
+    cv::Mat nz = m != 0;
+    nz.convertTo(out, CV_32F, 1.0 / 255.0);
+  } else if (m.depth() == CV_32F || m.depth() == CV_64F) {
+    m.convertTo(out, CV_32F);
+    cv::patchNaNs(out, 0.0);
+    cv::min(cv::max(out, 0.0), 1.0, out);
+  } else {
+    throw std::invalid_argument(what + ": unsupported mask type " + cv::typeToString(mask.type()));
+  }
+  return out;
+}
+
+}  // namespace diffdope
