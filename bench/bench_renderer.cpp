@@ -1,0 +1,76 @@
+// Renderer benchmark: B = 32 hypotheses of a ~14k-triangle textured mesh covering ~10k pixels, at 320x240 and
+// 640x480. Reports forward (loss only) and forward + gradient time per call and per hypothesis.
+//   build-core/bin/bench_renderer [--benchmark_filter=...]
+#include <benchmark/benchmark.h>
+
+#include <random>
+
+#include "diffdope/procedural.hpp"
+#include "diffdope/renderer.hpp"
+
+using namespace diffdope;
+
+namespace {
+
+struct Scene {
+  Camera cam;
+  Mesh mesh;
+  Observation obs;
+  std::vector<Pose> poses;
+};
+
+Scene make_scene(int width, int batch) {
+  Scene s;
+  const double f = 300.0 * width / 320.0;
+  s.cam = Camera(f, f, width / 2.0 - 0.5, width * 0.375 - 0.5, width, width * 3 / 4);
+  s.mesh = make_uv_sphere(0.05, 60, 120, make_label_texture(512, 7));  // 14,400 triangles
+  // Distance chosen so the sphere covers ~10,000 pixels: pi * (f r / z)^2 = 1e4.
+  const double z = f * 0.05 / std::sqrt(1e4 / M_PI);
+  Vector6d d0;
+  d0 << 0.0, 0.0, 0.0, 0.3, 0.2, 0.1;
+  const Pose truth = Pose(se3_exp(d0).R, Eigen::Vector3d(0.0, 0.0, z));
+  auto r = make_cpu_renderer();
+  const RenderImage img = r->render(s.cam, s.mesh, {truth})[0];
+  s.obs.rgb = img.color;
+  s.obs.depth = img.depth;
+  s.obs.mask = cv::Mat(img.coverage >= 0.5f) / 255;
+  s.obs.mask.convertTo(s.obs.mask, CV_32F);
+  std::mt19937 rng(3);
+  std::normal_distribution<double> n(0.0, 1.0);
+  for (int i = 0; i < batch; ++i) {
+    Vector6d d;
+    d << 0.003 * n(rng), 0.003 * n(rng), 0.003 * n(rng), 0.03 * n(rng), 0.03 * n(rng), 0.03 * n(rng);
+    s.poses.push_back(truth.updated(d));
+  }
+  return s;
+}
+
+void run(benchmark::State& state, bool gradient, bool cull) {
+  const int width = static_cast<int>(state.range(0));
+  const Scene s = make_scene(width, 32);
+  RenderOptions ro;
+  ro.cull_back_faces = cull;
+  auto r = make_cpu_renderer(ro);
+  std::vector<LossValue> out;
+  for (auto _ : state) {
+    r->evaluate(s.cam, s.mesh, s.obs, s.poses, LossOptions(), gradient, out);
+    benchmark::DoNotOptimize(out.data());
+  }
+  const double covered = cv::sum(s.obs.mask)[0];
+  state.counters["pixels"] = covered;
+  state.counters["triangles"] = s.mesh.num_triangles();
+  // Seconds per hypothesis (printed with an SI prefix: "2.1m" = 2.1 ms).
+  state.counters["s_per_hyp"] =
+      benchmark::Counter(32.0, benchmark::Counter::kIsIterationInvariantRate | benchmark::Counter::kInvert);
+}
+
+void BM_Forward(benchmark::State& st) { run(st, false, false); }
+void BM_ForwardGradient(benchmark::State& st) { run(st, true, false); }
+void BM_ForwardGradientCulled(benchmark::State& st) { run(st, true, true); }
+
+}  // namespace
+
+BENCHMARK(BM_Forward)->Arg(320)->Arg(640)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_ForwardGradient)->Arg(320)->Arg(640)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_ForwardGradientCulled)->Arg(320)->Arg(640)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK_MAIN();
