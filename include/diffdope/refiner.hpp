@@ -1,0 +1,104 @@
+#pragma once
+// The refiner: the paper's Algorithm 1 (Diff-DOPE). B gradient-descent runs start from the same initial pose,
+// run i with its own learning rate drawn from [lr_low, lr_high] and decayed as lr_i * lr_decay^(k/iters);
+// plain gradient descent, no momentum; the run with the lowest loss wins.
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "diffdope/camera.hpp"
+#include "diffdope/mesh.hpp"
+#include "diffdope/observation.hpp"
+#include "diffdope/pose.hpp"
+#include "diffdope/renderer.hpp"
+
+namespace diffdope {
+
+/// Every field has a default and the same name as its YAML key (see config/default.yaml).
+struct RefinerOptions {
+  int batch_size = 32;   // B: parallel runs (paper: 32)
+  int iterations = 100;  // gradient steps per run (paper: 100)
+  /// Learning-rate bounds, dimensionless. A step moves the object's centre by about lr * 2 * diameter * (loss
+  /// slope) and turns it by about 4 * lr * (slope) radians: translation gradients are scaled by diameter^2 and
+  /// rotation gradients (taken about the object's centre) by 4, so one rate means the same for small and big
+  /// objects and for translation and rotation. Every loss term is a mean in [0, ~1] whose slope is about one
+  /// per object size of misalignment, so lr = 0.01 moves ~2 % of the diameter (or ~2.3 deg) per step. The
+  /// paper's l = 0.001, h = 50 belong to its own loss scaling (a sum over pixels); the same behaviour (small
+  /// rates polish easy starts, large ones escape hard starts) holds here for [0.0005, 0.03]: over 100 decayed
+  /// steps the smallest rate travels ~4 % of the diameter, the largest ~2.3 diameters / 4 rad.
+  double lr_low = 0.0005;
+  double lr_high = 0.03;
+  bool lr_log_uniform = false;  // draw log-uniformly (the paper's "exponent" variant) instead of uniformly
+  double lr_decay = 0.1;        // rate multiplier reached at the last iteration (paper: 0.1)
+  double image_scale = 0.5;     // images and intrinsics are resized by this before refining (paper: 0.5)
+  LossOptions loss;             // term weights (all 1 as in the paper) and robustness constants
+  uint64_t seed = 0;            // learning-rate draws; same seed, same inputs -> same result
+  /// Stop when no run has improved its best loss by more than early_stop_tolerance (relative) for
+  /// early_stop_patience iterations. 0 = always run all iterations.
+  int early_stop_patience = 0;
+  double early_stop_tolerance = 1e-4;
+  /// Without an observed mask, the loss looks at the initial pose's projected bounding box grown by this
+  /// fraction of its size on every side (the object is assumed to stay inside that window).
+  double no_mask_window = 0.3;
+  /// Quality: a depth reading within this distance (metres) of the render is an inlier.
+  double inlier_threshold = 0.01;
+  /// Verdict thresholds: plausible when mask IoU >= min_mask_iou (if a mask was given) and the depth inlier
+  /// fraction >= min_depth_inliers (if depth was given).
+  double min_mask_iou = 0.5;
+  double min_depth_inliers = 0.5;
+  RenderOptions render;  // back-face culling, near plane, threads
+  std::string device = "cpu";  // cpu (cuda: see issue tracker)
+
+  /// Overrides fields present in a YAML file / string; unknown keys are an error (typos must not pass
+  /// silently). Throws std::runtime_error naming the file and key.
+  /// `base` supplies the values of keys the YAML does not set (the defaults when omitted).
+  static RefinerOptions from_yaml_file(const std::string& path);
+  static RefinerOptions from_yaml_file(const std::string& path, const RefinerOptions& base);
+  static RefinerOptions from_yaml_string(const std::string& yaml, const std::string& origin = "<string>");
+  static RefinerOptions from_yaml_string(const std::string& yaml, const RefinerOptions& base,
+                                         const std::string& origin);
+  /// Throws std::invalid_argument if a value is out of range.
+  void validate() const;
+};
+
+/// What a refinement did, with scores a caller can threshold.
+struct RefineResult {
+  Pose pose;                          // refined model pose in the camera frame (metres)
+  Pose initial_pose;
+  LossValue loss;                     // winner's final loss, per term (unweighted means) and total
+  double initial_loss = 0;            // loss of the initial pose
+  std::vector<double> run_losses;     // best loss of every run
+  std::vector<double> learning_rates; // every run's drawn rate
+  std::vector<double> history;        // winner's loss at every iteration
+  std::vector<std::vector<double>> run_histories;  // every run's loss at every iteration
+  int winner = -1;
+  int iterations = 0;                 // iterations actually run (early stop)
+  double time_ms = 0;                 // wall time of refine()
+  // Quality scores at the refined pose (at the refiner's image scale).
+  double mask_iou = -1;               // IoU of rendered and observed masks; -1 without a mask
+  double depth_inliers = -1;          // fraction of observed object depth pixels within inlier_threshold; -1 without depth
+  bool converged = false;             // the winner's loss stopped improving (relative change < 1 % over the last 10 %)
+  bool plausible = false;             // scores pass the thresholds in RefinerOptions
+};
+
+class Refiner {
+ public:
+  explicit Refiner(const RefinerOptions& options = RefinerOptions());
+  const RefinerOptions& options() const { return options_; }
+
+  /// Refines one object. `observed` holds the full-resolution images (any of rgb / depth / mask may be
+  /// empty; at least one of rgb or depth is needed), `camera` their intrinsics. Throws std::invalid_argument
+  /// on unusable input (NaN pose, object behind the camera, images that do not match the camera).
+  RefineResult refine(const Camera& camera, const Observation& observed, const Mesh& mesh, const Pose& initial);
+
+ private:
+  RefinerOptions options_;
+  std::unique_ptr<Renderer> renderer_;
+};
+
+/// One plain gradient step of the refiner's parametrisation: translation of the object's centre `pivot`
+/// (camera frame) and rotation about it, with the scaling described at RefinerOptions::lr_low.
+Pose refiner_step(const Pose& pose, const Vector6d& gradient, double lr, double diameter,
+                  const Eigen::Vector3d& pivot);
+
+}  // namespace diffdope

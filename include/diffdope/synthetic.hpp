@@ -1,0 +1,30 @@
+#pragma once
+// Synthetic observations for tests, the demo and the dataset generator: an object rendered over a textured
+// background plane, with sensor-like noise (colour noise, depth noise growing with z^2, depth holes).
+#include <cstdint>
+#include <random>
+
+#include "diffdope/observation.hpp"
+#include "diffdope/renderer.hpp"
+
+namespace diffdope {
+
+struct SyntheticNoise {
+  double rgb_sigma = 0.02;         // colour noise, [0, 1] units
+  double depth_sigma_at_1m = 0.002;  // depth noise (metres) at 1 m, grows with z^2
+  double hole_fraction = 0.05;     // fraction of depth pixels without a reading (blobs)
+  double background_depth = 0.9;   // metres: a plane behind the object
+  double brightness = 1.0;         // multiplies the object's colours (lighting mismatch)
+};
+
+/// Renders `mesh` at `pose` over a textured background plane and adds noise. The mask is the object's
+/// rendered coverage >= 0.5 (binary, 0/1).
+Observation synthesize_observation(Renderer& renderer, const Camera& camera, const Mesh& mesh, const Pose& pose,
+                                   const SyntheticNoise& noise, uint32_t seed);
+
+/// The paper's perturbation rule: rotate by exactly `angle` (radians) about a uniformly random axis through the
+/// object's centre (`centre` in model coordinates), and translate by exactly `distance` (metres) in a uniformly
+/// random direction.
+Pose perturb_pose(const Pose& pose, const Eigen::Vector3d& centre, double angle, double distance, std::mt19937_64& rng);
+
+}  // namespace diffdope

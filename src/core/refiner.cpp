@@ -1,0 +1,162 @@
+// Algorithm 1 of Diff-DOPE with learning-rate randomisation, on top of the renderer backend.
+#include "diffdope/refiner.hpp"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <limits>
+#include <opencv2/imgproc.hpp>
+#include <random>
+#include <stdexcept>
+
+namespace diffdope {
+
+Pose refiner_step(const Pose& pose, const Vector6d& g, double lr, double diameter, const Eigen::Vector3d& pivot) {
+  // The renderer's gradient is w.r.t. (rho, phi) about the camera origin; about the pivot p the rotation
+  // gradient is g_phi - p x g_rho (see pose.hpp for the update's first order).
+  const Eigen::Vector3d g_rho = g.head<3>();
+  const Eigen::Vector3d g_omega = g.tail<3>() - pivot.cross(g_rho);
+  const Eigen::Vector3d v = -lr * diameter * diameter * g_rho;
+  const Eigen::Vector3d w = -lr * 4.0 * g_omega;
+  const Eigen::Matrix3d Rw = so3_exp(w);
+  Pose out(Rw * pose.R, Rw * (pose.t - pivot) + pivot + v);
+  out.orthonormalize();
+  return out;
+}
+
+Refiner::Refiner(const RefinerOptions& options) : options_(options) {
+  options_.validate();
+  if (options_.device != "cpu" && options_.device != "auto")
+    throw std::invalid_argument("refiner: device '" + options_.device + "' is not available in this build (use cpu)");
+  renderer_ = make_cpu_renderer(options_.render);
+}
+
+namespace {
+
+cv::Mat window_mask(const Camera& cam, const Mesh& mesh, const Pose& pose, double grow) {
+  double x0 = 1e30, y0 = 1e30, x1 = -1e30, y1 = -1e30;
+  for (const auto& c : mesh.bbox_corners()) {
+    const Eigen::Vector3d X = pose * c;
+    if (X.z() <= 1e-3) return cv::Mat(cam.height, cam.width, CV_32F, cv::Scalar(1.0));
+    const double u = cam.fx * X.x() / X.z() + cam.cx, v = cam.fy * X.y() / X.z() + cam.cy;
+    x0 = std::min(x0, u), x1 = std::max(x1, u), y0 = std::min(y0, v), y1 = std::max(y1, v);
+  }
+  const double gx = grow * (x1 - x0), gy = grow * (y1 - y0);
+  cv::Mat m = cv::Mat::zeros(cam.height, cam.width, CV_32F);
+  const cv::Rect r(cv::Point(int(std::floor(x0 - gx)), int(std::floor(y0 - gy))),
+                   cv::Point(int(std::ceil(x1 + gx)) + 1, int(std::ceil(y1 + gy)) + 1));
+  m(r & cv::Rect(0, 0, cam.width, cam.height)).setTo(1.0);
+  return m;
+}
+
+}  // namespace
+
+RefineResult Refiner::refine(const Camera& camera, const Observation& observed, const Mesh& mesh,
+                             const Pose& initial) {
+  const auto t_start = std::chrono::steady_clock::now();
+  const RefinerOptions& o = options_;
+  observed.validate(camera);
+  if (!observed.has_rgb() && !observed.has_depth())
+    throw std::invalid_argument("refine: need at least an rgb or a depth image");
+  if (!initial.is_valid(1e-4))
+    throw std::invalid_argument("refine: initial pose is not finite or its rotation is not orthonormal");
+  const Eigen::Vector3d centre0 = initial * mesh.center();
+  if (!(centre0.z() > o.render.near_plane))
+    throw std::invalid_argument("refine: initial pose puts the object behind the camera (z = " +
+                                std::to_string(centre0.z()) + " m)");
+
+  const Camera cam = o.image_scale == 1.0 ? camera : camera.scaled(o.image_scale);
+  Observation obs = o.image_scale == 1.0 ? observed : observed.resized(cam);
+  LossOptions loss = o.loss;
+  const bool has_mask = obs.has_mask();
+  if (has_mask) {
+    if (cv::countNonZero(obs.mask > 0) == 0) throw std::invalid_argument("refine: the object mask is empty");
+  } else {
+    obs.mask = window_mask(cam, mesh, initial, o.no_mask_window);
+    loss.weight_mask = 0;  // the window is not an observation of the silhouette
+  }
+
+  const int B = o.batch_size, iters = o.iterations;
+  std::mt19937_64 rng(o.seed);
+  RefineResult res;
+  res.initial_pose = initial;
+  res.learning_rates.resize(B);
+  std::uniform_real_distribution<double> U(0.0, 1.0);
+  for (int i = 0; i < B; ++i) {
+    const double u = U(rng);
+    res.learning_rates[i] = o.lr_log_uniform ? o.lr_low * std::pow(o.lr_high / o.lr_low, u)
+                                             : o.lr_low + (o.lr_high - o.lr_low) * u;
+  }
+  if (B == 1) res.learning_rates[0] = 0.5 * (o.lr_low + o.lr_high);
+
+  std::vector<Pose> poses(B, initial), best_pose(B, initial);
+  std::vector<LossValue> values, best(B);
+  for (auto& b : best) b.total = std::numeric_limits<double>::infinity();
+  res.run_histories.assign(B, {});
+  const double diameter = std::max(mesh.diameter(), 1e-6);
+  int stale = 0;
+  double best_overall = std::numeric_limits<double>::infinity();
+  int k = 0;
+  for (; k <= iters; ++k) {
+    const bool last = k == iters;
+    renderer_->evaluate(cam, mesh, obs, poses, loss, !last, values);
+    if (k == 0) res.initial_loss = values[0].total;
+    bool improved = false;
+    for (int i = 0; i < B; ++i) {
+      res.run_histories[i].push_back(values[i].total);
+      if (values[i].total < best[i].total) {
+        best[i] = values[i];
+        best_pose[i] = poses[i];
+      }
+    }
+    const double round_best = std::min_element(best.begin(), best.end(), [](auto& a, auto& b) {
+                                return a.total < b.total;
+                              })->total;
+    if (round_best < best_overall * (1.0 - o.early_stop_tolerance)) improved = true;
+    best_overall = std::min(best_overall, round_best);
+    stale = improved ? 0 : stale + 1;
+    if (last || (o.early_stop_patience > 0 && stale >= o.early_stop_patience)) break;
+    const double decay = std::pow(o.lr_decay, double(k) / iters);
+    for (int i = 0; i < B; ++i) {
+      if (!std::isfinite(values[i].total)) continue;  // a run that left the image keeps its pose
+      const Eigen::Vector3d pivot = poses[i] * mesh.center();
+      poses[i] = refiner_step(poses[i], values[i].gradient, res.learning_rates[i] * decay, diameter, pivot);
+    }
+  }
+  res.iterations = std::min(k, iters);
+
+  res.run_losses.resize(B);
+  for (int i = 0; i < B; ++i) res.run_losses[i] = best[i].total;
+  res.winner = int(std::min_element(res.run_losses.begin(), res.run_losses.end()) - res.run_losses.begin());
+  res.pose = best_pose[res.winner];
+  res.loss = best[res.winner];
+  res.history = res.run_histories[res.winner];
+
+  // Quality scores at the refined pose.
+  const RenderImage img = renderer_->render(cam, mesh, {res.pose}, obs.mask)[0];
+  const cv::Mat rendered = img.coverage >= 0.5f;
+  if (has_mask) {
+    const cv::Mat observed_mask = obs.mask >= 0.5f;
+    const double inter = cv::countNonZero(rendered & observed_mask), uni = cv::countNonZero(rendered | observed_mask);
+    res.mask_iou = uni > 0 ? inter / uni : 0.0;
+  }
+  if (obs.has_depth()) {
+    const cv::Mat object = (obs.mask >= 0.5f) & (obs.depth > 0);
+    const int n = cv::countNonZero(object);
+    cv::Mat diff;
+    cv::absdiff(obs.depth, img.depth, diff);
+    const cv::Mat inlier = object & (img.depth > 0) & (diff < o.inlier_threshold);
+    res.depth_inliers = n > 0 ? double(cv::countNonZero(inlier)) / n : 0.0;
+  }
+  const size_t n = res.history.size(), tail = std::max<size_t>(2, n / 10);
+  if (n >= tail) {
+    const double a = res.history[n - tail], b = res.history.back();
+    res.converged = std::abs(a - b) <= 0.01 * std::max(std::abs(a), 1e-12);
+  }
+  res.plausible = std::isfinite(res.loss.total) && (res.mask_iou < 0 || res.mask_iou >= o.min_mask_iou) &&
+                  (res.depth_inliers < 0 || res.depth_inliers >= o.min_depth_inliers);
+  res.time_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t_start).count();
+  return res;
+}
+
+}  // namespace diffdope
