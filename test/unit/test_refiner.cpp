@@ -1,0 +1,182 @@
+// The refiner on synthetic scenes (rendered by our renderer, with colour/depth noise, holes, a textured
+// background and a brightness mismatch), its options, and its input checks.
+#include <gtest/gtest.h>
+
+#include "diffdope/metrics.hpp"
+#include "diffdope/procedural.hpp"
+#include "diffdope/refiner.hpp"
+#include "diffdope/synthetic.hpp"
+
+using namespace diffdope;
+
+namespace {
+
+struct Scene {
+  Camera cam{420, 420, 159.5, 119.5, 320, 240};
+  Mesh mesh = make_l_block(0.12, make_label_texture(256, 31));
+  Pose truth;
+  Observation obs;
+};
+
+Scene make_scene(uint32_t seed) {
+  Scene s;
+  Vector6d d;
+  d << 0, 0, 0, 0.7, -0.4, 0.3;
+  s.truth = Pose(se3_exp(d).R, Eigen::Vector3d(0.01, -0.01, 0.55));
+  auto r = make_cpu_renderer();
+  SyntheticNoise noise;
+  noise.brightness = 0.9;
+  s.obs = synthesize_observation(*r, s.cam, s.mesh, s.truth, noise, seed);
+  return s;
+}
+
+RefinerOptions test_options() {
+  RefinerOptions o;
+  o.batch_size = 16;
+  o.iterations = 60;
+  o.image_scale = 1.0;  // the test images are already small
+  return o;
+}
+
+double add_mm(const Scene& s, const Pose& p) { return 1e3 * add_error(metric_points(s.mesh), p, s.truth); }
+
+}  // namespace
+
+TEST(Refiner, RecoversHardPerturbation) {
+  const Scene s = make_scene(1);
+  std::mt19937_64 rng(7);
+  const Pose init = perturb_pose(s.truth, s.mesh.center(), 40 * M_PI / 180, 0.02, rng);
+  Refiner refiner(test_options());
+  const RefineResult r = refiner.refine(s.cam, s.obs, s.mesh, init);
+  EXPECT_GT(add_mm(s, init), 30.0);
+  EXPECT_LT(add_mm(s, r.pose), 5.0);
+  EXPECT_TRUE(r.plausible);
+  EXPECT_GT(r.mask_iou, 0.9);
+  EXPECT_GT(r.depth_inliers, 0.8);
+  EXPECT_LT(r.loss.total, r.initial_loss);
+  EXPECT_EQ(r.run_losses.size(), 16u);
+  EXPECT_EQ(r.history.size(), 61u);
+  EXPECT_EQ(r.iterations, 60);
+  EXPECT_DOUBLE_EQ(r.loss.total, *std::min_element(r.run_losses.begin(), r.run_losses.end()));
+}
+
+TEST(Refiner, EasyStartsDoNotGetWorse) {
+  for (uint32_t seed : {2u, 3u}) {
+    const Scene s = make_scene(seed);
+    std::mt19937_64 rng(seed);
+    const Pose init = perturb_pose(s.truth, s.mesh.center(), 1 * M_PI / 180, 0.001, rng);
+    Refiner refiner(test_options());
+    const RefineResult r = refiner.refine(s.cam, s.obs, s.mesh, init);
+    EXPECT_LT(add_mm(s, r.pose), add_mm(s, init));
+  }
+}
+
+TEST(Refiner, SameSeedSameResultOtherSeedOtherRates) {
+  const Scene s = make_scene(4);
+  std::mt19937_64 rng(4);
+  const Pose init = perturb_pose(s.truth, s.mesh.center(), 10 * M_PI / 180, 0.01, rng);
+  RefinerOptions o = test_options();
+  o.iterations = 20;
+  const RefineResult a = Refiner(o).refine(s.cam, s.obs, s.mesh, init);
+  const RefineResult b = Refiner(o).refine(s.cam, s.obs, s.mesh, init);
+  EXPECT_EQ(a.pose.matrix(), b.pose.matrix());
+  EXPECT_EQ(a.learning_rates, b.learning_rates);
+  o.seed = 99;
+  const RefineResult c = Refiner(o).refine(s.cam, s.obs, s.mesh, init);
+  EXPECT_NE(a.learning_rates, c.learning_rates);
+  for (double lr : c.learning_rates) {
+    EXPECT_GE(lr, o.lr_low);
+    EXPECT_LE(lr, o.lr_high);
+  }
+}
+
+TEST(Refiner, WorksWithEachModalityMissing) {
+  const Scene s = make_scene(5);
+  std::mt19937_64 rng(5);
+  const Pose init = perturb_pose(s.truth, s.mesh.center(), 10 * M_PI / 180, 0.01, rng);
+  const double before = add_mm(s, init);
+  struct Variant {
+    const char* name;
+    bool rgb, depth, mask;
+  };
+  for (const Variant v : {Variant{"rgb only + mask", true, false, true}, Variant{"depth only + mask", false, true, true},
+                          Variant{"rgb-d, no mask", true, true, false}, Variant{"depth only, no mask", false, true, false}}) {
+    Observation o = s.obs;
+    if (!v.rgb) o.rgb.release();
+    if (!v.depth) o.depth.release();
+    if (!v.mask) o.mask.release();
+    const RefineResult r = Refiner(test_options()).refine(s.cam, o, s.mesh, init);
+    EXPECT_LT(add_mm(s, r.pose), 0.5 * before) << v.name;
+    EXPECT_EQ(r.mask_iou < 0, !v.mask) << v.name;
+    EXPECT_EQ(r.depth_inliers < 0, !v.depth) << v.name;
+  }
+}
+
+TEST(Refiner, EarlyStopEndsWhenNothingImproves) {
+  const Scene s = make_scene(6);
+  RefinerOptions o = test_options();
+  o.iterations = 200;
+  o.early_stop_patience = 5;
+  o.early_stop_tolerance = 0.5;  // demands halving every 5 iterations: stops early
+  const RefineResult r = Refiner(o).refine(s.cam, s.obs, s.mesh, s.truth);
+  EXPECT_LT(r.iterations, 200);
+  EXPECT_EQ(r.history.size(), size_t(r.iterations + 1));
+}
+
+TEST(Refiner, RejectsBadInput) {
+  const Scene s = make_scene(7);
+  Refiner refiner(test_options());
+  Pose nan_pose = s.truth;
+  nan_pose.t.z() = std::nan("");
+  EXPECT_THROW(refiner.refine(s.cam, s.obs, s.mesh, nan_pose), std::invalid_argument);
+  Pose behind = s.truth;
+  behind.t.z() = -0.5;
+  EXPECT_THROW(refiner.refine(s.cam, s.obs, s.mesh, behind), std::invalid_argument);
+  Observation empty_mask = s.obs;
+  empty_mask.mask = cv::Mat::zeros(s.cam.height, s.cam.width, CV_32F);
+  EXPECT_THROW(refiner.refine(s.cam, empty_mask, s.mesh, s.truth), std::invalid_argument);
+  Observation wrong_size = s.obs;
+  wrong_size.depth = cv::Mat::zeros(10, 10, CV_32F);
+  EXPECT_THROW(refiner.refine(s.cam, wrong_size, s.mesh, s.truth), std::invalid_argument);
+  Observation nothing;
+  nothing.mask = s.obs.mask;
+  EXPECT_THROW(refiner.refine(s.cam, nothing, s.mesh, s.truth), std::invalid_argument);
+}
+
+TEST(RefinerOptions, YamlOverridesAndRejectsTypos) {
+  const RefinerOptions o = RefinerOptions::from_yaml_string(
+      "batch_size: 8\niterations: 50\nlr_log_uniform: true\nloss: {weight_rgb: 0, depth_truncation: 0.02}\n"
+      "render: {cull_back_faces: true}\n");
+  EXPECT_EQ(o.batch_size, 8);
+  EXPECT_EQ(o.iterations, 50);
+  EXPECT_TRUE(o.lr_log_uniform);
+  EXPECT_EQ(o.loss.weight_rgb, 0.0);
+  EXPECT_EQ(o.loss.weight_depth, 1.0);  // untouched keys keep their defaults
+  EXPECT_EQ(o.loss.depth_truncation, 0.02);
+  EXPECT_TRUE(o.render.cull_back_faces);
+  try {
+    RefinerOptions::from_yaml_string("batch_sise: 8\n", "my.yaml");
+    FAIL() << "a misspelt key must be rejected";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("batch_sise"), std::string::npos);
+    EXPECT_NE(std::string(e.what()).find("my.yaml"), std::string::npos);
+  }
+  EXPECT_THROW(RefinerOptions::from_yaml_string("lr_low: -1\n"), std::runtime_error);
+  EXPECT_THROW(RefinerOptions::from_yaml_string("iterations: lots\n"), std::runtime_error);
+  EXPECT_THROW(RefinerOptions::from_yaml_file("/nonexistent/options.yaml"), std::runtime_error);
+}
+
+TEST(Metrics, AddAddsAndAuc) {
+  const std::vector<Eigen::Vector3d> pts = {{0.1, 0, 0}, {-0.1, 0, 0}, {0, 0.1, 0}, {0, -0.1, 0}};
+  const Pose truth;
+  const Pose shifted(Eigen::Matrix3d::Identity(), Eigen::Vector3d(0.01, 0, 0));
+  EXPECT_NEAR(add_error(pts, shifted, truth), 0.01, 1e-12);
+  Vector6d d = Vector6d::Zero();
+  d[5] = M_PI / 2;  // a quarter turn maps this symmetric point set onto itself
+  const Pose turned(se3_exp(d).R, Eigen::Vector3d::Zero());
+  EXPECT_NEAR(add_error(pts, turned, truth), 0.1 * std::sqrt(2.0), 1e-12);
+  EXPECT_NEAR(adds_error(pts, turned, truth), 0.0, 1e-12);
+  EXPECT_NEAR(accuracy_auc({0.0, 0.0}, 0.05), 100.0, 1e-9);
+  EXPECT_NEAR(accuracy_auc({0.025}, 0.05), 50.0, 1e-9);
+  EXPECT_NEAR(accuracy_auc({0.1, 0.0}, 0.05), 50.0, 1e-9);
+}
