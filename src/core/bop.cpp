@@ -1,0 +1,184 @@
+#include "diffdope/bop.hpp"
+
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <opencv2/imgcodecs.hpp>
+#include <stdexcept>
+
+namespace diffdope {
+namespace fs = std::filesystem;
+using nlohmann::json;
+
+namespace {
+
+json read_json(const std::string& path) {
+  std::ifstream f(path);
+  if (!f) throw std::runtime_error(path + ": cannot open");
+  try {
+    return json::parse(f);
+  } catch (const json::exception& e) {
+    throw std::runtime_error(path + ": invalid JSON (" + e.what() + ")");
+  }
+}
+
+std::string scene_dir(const std::string& root, const std::string& split, int scene) {
+  char buf[16];
+  std::snprintf(buf, sizeof buf, "%06d", scene);
+  return root + "/" + split + "/" + buf;
+}
+
+Pose pose_mm(const json& e, const std::string& where) {
+  try {
+    const auto R = e.at("cam_R_m2c").get<std::vector<double>>();
+    const auto t = e.at("cam_t_m2c").get<std::vector<double>>();
+    if (R.size() != 9 || t.size() != 3) throw std::runtime_error("cam_R_m2c needs 9 values, cam_t_m2c 3");
+    std::array<double, 9> r;
+    std::copy(R.begin(), R.end(), r.begin());
+    Pose p = Pose::from_rotation_rowmajor(r, 0.001 * Eigen::Vector3d(t[0], t[1], t[2]));
+    if (!p.is_valid(1e-3)) throw std::runtime_error("rotation is not orthonormal or values are not finite");
+    p.orthonormalize();
+    return p;
+  } catch (const json::exception& ex) {
+    throw std::runtime_error(where + ": " + ex.what());
+  } catch (const std::runtime_error& ex) {
+    throw std::runtime_error(where + ": " + ex.what());
+  }
+}
+
+cv::Mat imread_checked(const std::string& path, int flags) {
+  cv::Mat m = cv::imread(path, flags);
+  if (m.empty()) throw std::runtime_error(path + ": missing or unreadable image");
+  return m;
+}
+
+}  // namespace
+
+BopDataset::BopDataset(const std::string& root, const std::string& split) : root_(root), split_(split) {
+  if (!fs::is_directory(root + "/models")) throw std::runtime_error(root + "/models: not a directory");
+  if (!fs::is_directory(root + "/" + split)) throw std::runtime_error(root + "/" + split + ": not a directory");
+  const std::string info = root + "/models/models_info.json";
+  if (fs::exists(info)) {
+    const json j = read_json(info);
+    for (const auto& [key, v] : j.items())
+      symmetric_[std::stoi(key)] = v.contains("symmetries_discrete") || v.contains("symmetries_continuous");
+  }
+}
+
+std::vector<int> BopDataset::scene_ids() const {
+  std::vector<int> ids;
+  for (const auto& e : fs::directory_iterator(root_ + "/" + split_))
+    if (e.is_directory()) {
+      try {
+        ids.push_back(std::stoi(e.path().filename().string()));
+      } catch (...) {
+      }
+    }
+  std::sort(ids.begin(), ids.end());
+  return ids;
+}
+
+BopImage BopDataset::image(int scene_id, int im_id) const {
+  const std::string dir = scene_dir(root_, split_, scene_id);
+  BopImage img;
+  img.scene_id = scene_id;
+  img.im_id = im_id;
+  const std::string key = std::to_string(im_id);
+  const json cams = read_json(dir + "/scene_camera.json");
+  if (!cams.contains(key)) throw std::runtime_error(dir + "/scene_camera.json: no entry for image " + key);
+  const auto K = cams[key].at("cam_K").get<std::vector<double>>();
+  if (K.size() != 9) throw std::runtime_error(dir + "/scene_camera.json: cam_K needs 9 values");
+  img.depth_scale = cams[key].value("depth_scale", 1.0);
+  char name[32];
+  std::snprintf(name, sizeof name, "%06d.png", im_id);
+  cv::Mat rgb = imread_checked(dir + "/rgb/" + name, cv::IMREAD_COLOR);
+  img.camera = Camera(K[0], K[4], K[2], K[5], rgb.cols, rgb.rows);
+  const json gts = read_json(dir + "/scene_gt.json");
+  if (gts.contains(key)) {
+    int inst = 0;
+    for (const auto& e : gts[key]) {
+      BopInstance b;
+      b.obj_id = e.at("obj_id").get<int>();
+      b.inst = inst++;
+      b.pose = pose_mm(e, dir + "/scene_gt.json");
+      img.gt.push_back(b);
+    }
+  }
+  return img;
+}
+
+Observation BopDataset::observation(const BopImage& img, int inst) const {
+  const std::string dir = scene_dir(root_, split_, img.scene_id);
+  char name[32], mname[40];
+  std::snprintf(name, sizeof name, "%06d.png", img.im_id);
+  std::snprintf(mname, sizeof mname, "%06d_%06d.png", img.im_id, inst);
+  Observation o;
+  o.rgb = to_rgb_float(imread_checked(dir + "/rgb/" + name, cv::IMREAD_COLOR), true, dir + "/rgb/" + name);
+  const std::string dpath = dir + "/depth/" + name;
+  if (fs::exists(dpath)) o.depth = to_depth_metres(imread_checked(dpath, cv::IMREAD_ANYDEPTH), 0.001 * img.depth_scale, dpath);
+  const std::string mpath = dir + "/mask_visib/" + mname;
+  if (fs::exists(mpath)) o.mask = to_mask_float(imread_checked(mpath, cv::IMREAD_GRAYSCALE), mpath);
+  o.validate(img.camera);
+  return o;
+}
+
+bool BopDataset::has_model(int obj_id) const {
+  char name[32];
+  std::snprintf(name, sizeof name, "obj_%06d.ply", obj_id);
+  return fs::exists(root_ + "/models/" + name);
+}
+
+const Mesh& BopDataset::model(int obj_id) {
+  auto it = models_.find(obj_id);
+  if (it != models_.end()) return *it->second;
+  char name[32];
+  std::snprintf(name, sizeof name, "obj_%06d.ply", obj_id);
+  MeshLoadOptions opt;
+  opt.scale = 0.001;
+  auto mesh = std::make_unique<Mesh>(Mesh::load(root_ + "/models/" + name, opt));
+  return *(models_[obj_id] = std::move(mesh));
+}
+
+bool BopDataset::symmetric(int obj_id) const {
+  auto it = symmetric_.find(obj_id);
+  return it != symmetric_.end() && it->second;
+}
+
+std::vector<Perturbation> read_perturbations(const std::string& path) {
+  const json j = read_json(path);
+  if (!j.is_object()) throw std::runtime_error(path + ": expected an object keyed by sample index");
+  std::vector<Perturbation> out;
+  for (const auto& [key, list] : j.items()) {
+    int sample;
+    try {
+      sample = std::stoi(key);
+    } catch (...) {
+      throw std::runtime_error(path + ": key '" + key + "' is not a sample index");
+    }
+    if (!list.is_array()) throw std::runtime_error(path + ": sample " + key + " is not a list");
+    std::map<int, int> seen;
+    for (const auto& e : list) {
+      Perturbation p;
+      p.sample = sample;
+      p.obj_id = e.at("obj_id").get<int>();
+      p.occurrence = seen[p.obj_id]++;
+      p.pose = pose_mm(e, path + " (sample " + key + ")");
+      out.push_back(p);
+    }
+  }
+  std::sort(out.begin(), out.end(), [](const Perturbation& a, const Perturbation& b) {
+    return a.sample != b.sample ? a.sample < b.sample : a.obj_id != b.obj_id ? a.obj_id < b.obj_id : a.occurrence < b.occurrence;
+  });
+  return out;
+}
+
+std::string perturbation_level(const std::string& filename) {
+  const std::string stem = fs::path(filename).stem().string();
+  if (stem.rfind("scene_error_deg_001", 0) == 0) return "easy";
+  if (stem.rfind("scene_error_deg_010", 0) == 0) return "medium";
+  if (stem.rfind("scene_error_deg_040", 0) == 0) return "hard";
+  return stem;
+}
+
+}  // namespace diffdope
