@@ -19,8 +19,8 @@ struct Observation {
   /// Throws std::invalid_argument naming the image and the problem (type, size mismatch with the camera).
   void validate(const Camera& camera) const;
 
-  /// Resized copy for a camera scaled by `scale`: colour area-averaged, depth and mask nearest (no mixing of
-  /// depths across edges).
+  /// Resized copy for `scaled_camera`: colour and mask area-averaged (the mask becomes fractional at its
+  /// border), depth averaged over the valid readings of each block (blocks less than half measured: no reading).
   Observation resized(const Camera& scaled_camera) const;
 };
 

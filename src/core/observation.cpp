@@ -39,11 +39,24 @@ void Observation::validate(const Camera& camera) const {
 }
 
 Observation Observation::resized(const Camera& cam) const {
+  // Area averaging everywhere: nearest-neighbour picking would shift edges by half a source pixel (a
+  // systematic pose bias). The mask becomes fractional at its border (S in [0, 1] is what the loss expects);
+  // depth averages only the valid readings of each block.
   Observation out;
   const cv::Size size(cam.width, cam.height);
   if (has_rgb()) cv::resize(rgb, out.rgb, size, 0, 0, cv::INTER_AREA);
-  if (has_depth()) cv::resize(depth, out.depth, size, 0, 0, cv::INTER_NEAREST);
-  if (has_mask()) cv::resize(mask, out.mask, size, 0, 0, cv::INTER_NEAREST);
+  if (has_mask()) cv::resize(mask, out.mask, size, 0, 0, cv::INTER_AREA);
+  if (has_depth()) {
+    cv::Mat valid = depth > 0.f, validf, sum, weight;
+    valid.convertTo(validf, CV_32F, 1.0 / 255.0);
+    cv::resize(depth.mul(validf), sum, size, 0, 0, cv::INTER_AREA);
+    cv::resize(validf, weight, size, 0, 0, cv::INTER_AREA);
+    out.depth = cv::Mat::zeros(size, CV_32F);
+    const cv::Mat enough = weight >= 0.5f;  // a block needs at least half its area measured
+    cv::Mat avg;
+    cv::divide(sum, cv::max(weight, 1e-6), avg);
+    avg.copyTo(out.depth, enough);
+  }
   return out;
 }
 
