@@ -9,11 +9,18 @@
 
 namespace diffdope {
 
-/// RGB texture, float in [0, 1], row 0 = top image row.
+/// One RGB image, float in [0, 1], row 0 = top image row.
+struct TextureImage {
+  int width = 0, height = 0;
+  std::vector<float> rgb;  // 3 * width * height
+};
+
+/// RGB texture (level 0 in width/height/rgb) and its mip pyramid, built by Mesh::finalize().
 struct Texture {
   int width = 0, height = 0;
   std::vector<float> rgb;  // 3 * width * height
   std::string source;      // file it came from, for messages
+  std::vector<TextureImage> mips;  // levels 1.. (each half the previous size, down to 1x1)
 };
 
 struct MeshLoadOptions {
@@ -65,10 +72,12 @@ class Mesh {
 
  private:
   void build_adjacency();
+  void build_mipmaps();
   Eigen::Vector3d bbox_min_ = Eigen::Vector3d::Zero(), bbox_max_ = Eigen::Vector3d::Zero();
   double diameter_ = 0;
   std::vector<int> neighbors_, opposite_;
   std::vector<unsigned char> seams_;
+  std::vector<float> tri_uv_area_;
 };
 
 }  // namespace diffdope

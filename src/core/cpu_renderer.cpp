@@ -36,11 +36,16 @@ struct Workspace {
   std::vector<Vec3f> cam;
   std::vector<Vec2f> pix;
   std::vector<float> tri_area;
+  std::vector<signed char> tri_level;
   std::vector<float> zbuf;
   std::vector<int> tri;
   std::vector<PixelAttr> pre, post, g_pre, g_post;
   std::vector<BlendEvent> events;
 };
+
+ProjectedView projected_view(const Workspace& ws) {
+  return ProjectedView{ws.cam.data(), ws.pix.data(), ws.tri_area.data(), ws.tri_level.data()};
+}
 
 /// What every hypothesis of one call shares.
 struct CallContext {
@@ -111,9 +116,13 @@ Rect CpuRenderer::rasterize(const CallContext& ctx, const Pose& pose, Workspace&
   ws.cam.resize(nv);
   ws.pix.resize(nv);
   ws.tri_area.resize(nt);
+  ws.tri_level.resize(nt);
   for (int i = 0; i < nv; ++i) vertex_setup(M, T, K, ctx.near_z, i, ws.cam.data(), ws.pix.data());
-  for (int t = 0; t < nt; ++t) ws.tri_area[t] = triangle_setup(M, ws.cam.data(), ws.pix.data(), ctx.near_z, ctx.cull, t);
-  const ProjectedView G{ws.cam.data(), ws.pix.data(), ws.tri_area.data()};
+  for (int t = 0; t < nt; ++t) {
+    ws.tri_area[t] = triangle_setup(M, ws.cam.data(), ws.pix.data(), ctx.near_z, ctx.cull, t);
+    ws.tri_level[t] = static_cast<signed char>(triangle_mip_level(M, t, ws.tri_area[t]));
+  }
+  const ProjectedView G = projected_view(ws);
 
   // Region of interest: projected model box U observed mask box, plus margin.
   Rect roi{0, 0, K.width, K.height};
@@ -294,7 +303,7 @@ void CpuRenderer::evaluate(const Camera& camera, const Mesh& mesh, const Observa
       return;  // a NaN or non-rotation pose gets an infinite loss, never a gradient
     }
     const Rect roi = rasterize(ctx, poses[h], ws, with_gradient);
-    const ProjectedView G{ws.cam.data(), ws.pix.data(), ws.tri_area.data()};
+    const ProjectedView G = projected_view(ws);
     const int W = roi.width(), N = W * roi.height();
     if (with_gradient) ws.g_post.resize(N);
     double sum_rgb = 0, sum_depth = 0, sum_mask = 0;

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <stdexcept>
+#include <opencv2/imgproc.hpp>
 #include <unordered_map>
 
 namespace diffdope {
@@ -75,6 +76,30 @@ void Mesh::finalize() {
   }
   diameter_ = compute_diameter(positions);
   build_adjacency();
+  build_mipmaps();
+}
+
+void Mesh::build_mipmaps() {
+  for (Texture& t : textures) {
+    t.mips.clear();
+    cv::Mat prev(t.height, t.width, CV_32FC3, t.rgb.data());
+    while ((prev.cols > 1 || prev.rows > 1) && int(t.mips.size()) + 1 < kMaxTextureLevels) {
+      cv::Mat next;
+      cv::resize(prev, next, cv::Size(std::max(1, prev.cols / 2), std::max(1, prev.rows / 2)), 0, 0, cv::INTER_AREA);
+      TextureImage img;
+      img.width = next.cols;
+      img.height = next.rows;
+      img.rgb.assign(next.ptr<float>(0), next.ptr<float>(0) + 3 * next.cols * next.rows);
+      t.mips.push_back(std::move(img));
+      prev = cv::Mat(t.mips.back().height, t.mips.back().width, CV_32FC3, t.mips.back().rgb.data());
+    }
+  }
+  tri_uv_area_.assign(num_triangles(), 0.f);
+  if (uvs.empty()) return;
+  for (int t = 0; t < num_triangles(); ++t) {
+    const Vec2f a = uvs[triangles[3 * t]], b = uvs[triangles[3 * t + 1]], c = uvs[triangles[3 * t + 2]];
+    tri_uv_area_[t] = 0.5f * std::fabs((b.x - a.x) * (c.y - a.y) - (b.y - a.y) * (c.x - a.x));
+  }
 }
 
 void Mesh::build_adjacency() {
@@ -148,7 +173,13 @@ std::vector<Eigen::Vector3d> Mesh::bbox_corners() const {
 
 MeshView Mesh::view(std::vector<TextureView>& storage) const {
   storage.clear();
-  for (const Texture& t : textures) storage.push_back(TextureView{t.rgb.data(), t.width, t.height});
+  for (const Texture& t : textures) {
+    TextureView tv{};
+    tv.level[0] = TextureLevelView{t.rgb.data(), t.width, t.height};
+    tv.levels = 1;
+    for (const TextureImage& m : t.mips) tv.level[tv.levels++] = TextureLevelView{m.rgb.data(), m.width, m.height};
+    storage.push_back(tv);
+  }
   MeshView v;
   v.positions = positions.data();
   v.uvs = uvs.empty() ? nullptr : uvs.data();
@@ -159,6 +190,7 @@ MeshView Mesh::view(std::vector<TextureView>& storage) const {
   v.opposite = opposite_.data();
   v.seams = seams_.data();
   v.textures = storage.empty() ? nullptr : storage.data();
+  v.tri_uv_area = tri_uv_area_.data();
   v.num_vertices = num_vertices();
   v.num_triangles = num_triangles();
   v.num_textures = static_cast<int>(storage.size());

@@ -6,14 +6,30 @@
 
 namespace diffdope {
 
-/// Read-only view of an RGB float texture, row 0 = top image row, 3 floats per texel in [0, 1].
-struct TextureView {
+/// Read-only view of one RGB float image, row 0 = top image row, 3 floats per texel in [0, 1].
+struct TextureLevelView {
   const float* rgb;
   int width, height;
 };
 
+/// A texture with its mip pyramid (level 0 = full size, each next level half the size).
+constexpr int kMaxTextureLevels = 16;
+struct TextureView {
+  TextureLevelView level[kMaxTextureLevels];
+  int levels;
+};
+
+/// Mip level for a triangle covering `pixel_area` pixels and `texel_area` level-0 texels: the level whose texels
+/// are about one pixel wide (round(log2(sqrt(texel_area / pixel_area)))). Sampling a finer level would alias
+/// (texel noise instead of the filtered colour a camera sees) and miss the cache on large textures.
+DD_HOST_DEVICE int mip_level(float texel_area, float pixel_area, int levels) {
+  if (!(pixel_area > 0.f) || !(texel_area > pixel_area)) return 0;
+  const int l = static_cast<int>(floorf(0.5f * log2f(texel_area / pixel_area) + 0.5f));
+  return l < 0 ? 0 : (l >= levels ? levels - 1 : l);
+}
+
 /// Samples tex at uv. If d_du / d_dv are non-null they receive d(colour)/du and d(colour)/dv.
-DD_HOST_DEVICE Vec3f sample_bilinear(const TextureView& tex, Vec2f uv, Vec3f* d_du, Vec3f* d_dv) {
+DD_HOST_DEVICE Vec3f sample_bilinear(const TextureLevelView& tex, Vec2f uv, Vec3f* d_du, Vec3f* d_dv) {
   const float x = uv.x * tex.width - 0.5f;
   const float y = (1.f - uv.y) * tex.height - 0.5f;
   const float xf = floorf(x), yf = floorf(y);
