@@ -40,6 +40,7 @@ struct Workspace {
   std::vector<float> zbuf;
   std::vector<int> tri;
   std::vector<PixelAttr> pre, post, g_pre, g_post;
+  std::vector<detail::ShadeBary> bary;  // per pixel, for the backward pass
   std::vector<BlendEvent> events;
 };
 
@@ -174,12 +175,21 @@ Rect CpuRenderer::rasterize(const CallContext& ctx, const Pose& pose, Workspace&
       dx[k] = -orient * (s[(k + 1) % 3].y - s[k].y);  // d(edge)/dx
     }
     for (int y = ys; y <= ye; ++y) {
+      // Wide triangles: trim the row to the triangle's span (one pixel of slack for rounding; the exact test
+      // stays below). Small ones are cheaper to test pixel by pixel.
+      int lo = xs, hi = xe;
+      for (int k = 0; k < 3 && xe - xs > 8; ++k) {
+        const float e0 = orient * edge_function(s[k], s[(k + 1) % 3], Vec2f{static_cast<float>(xs), static_cast<float>(y)});
+        if (dx[k] > 0.f) lo = std::max(lo, xs + static_cast<int>(std::ceil(-e0 / dx[k])) - 1);
+        else if (dx[k] < 0.f) hi = std::min(hi, xs + static_cast<int>(std::floor(-e0 / dx[k])) + 1);
+      }
+      if (lo > hi) continue;
       float e[3];
       for (int k = 0; k < 3; ++k)
-        e[k] = orient * edge_function(s[k], s[(k + 1) % 3], Vec2f{static_cast<float>(xs), static_cast<float>(y)});
+        e[k] = orient * edge_function(s[k], s[(k + 1) % 3], Vec2f{static_cast<float>(lo), static_cast<float>(y)});
       float* zrow = ws.zbuf.data() + (y - roi.y0) * W - roi.x0;
       int* trow = ws.tri.data() + (y - roi.y0) * W - roi.x0;
-      for (int x = xs; x <= xe; ++x, e[0] += dx[0], e[1] += dx[1], e[2] += dx[2]) {
+      for (int x = lo; x <= hi; ++x, e[0] += dx[0], e[1] += dx[1], e[2] += dx[2]) {
         bool inside = true;
         for (int k = 0; k < 3; ++k) inside &= e[k] > 0.f || (e[k] == 0.f && top_left[k]);
         if (!inside) continue;
@@ -194,6 +204,7 @@ Rect CpuRenderer::rasterize(const CallContext& ctx, const Pose& pose, Workspace&
 
   // Shading (deferred: only the visible triangle of each pixel).
   ws.pre.resize(N);
+  ws.bary.resize(N);
   for (int y = roi.y0; y < roi.y1; ++y) {
     for (int x = roi.x0; x < roi.x1; ++x) {
       const int i = (y - roi.y0) * W + (x - roi.x0);
@@ -205,7 +216,7 @@ Rect CpuRenderer::rasterize(const CallContext& ctx, const Pose& pose, Workspace&
       }
       Vec3f c;
       float d;
-      shade_pixel(M, G, K, t, static_cast<float>(x), static_cast<float>(y), &c, &d);
+      shade_pixel(M, G, K, t, static_cast<float>(x), static_cast<float>(y), &c, &d, false, &ws.bary[i]);
       a = PixelAttr{1.f, {c.x, c.y, c.z}, d};
     }
   }
@@ -345,7 +356,7 @@ void CpuRenderer::evaluate(const Camera& camera, const Mesh& mesh, const Observa
         const PixelAttr& g = ws.g_pre[i];
         if (g.c[0] == 0.f && g.c[1] == 0.f && g.c[2] == 0.f && g.d == 0.f) continue;
         shade_pixel_backward(ctx.mesh, G, ctx.K, t, static_cast<float>(x), static_cast<float>(y),
-                             Vec3f{g.c[0], g.c[1], g.c[2]}, g.d, grad);
+                             Vec3f{g.c[0], g.c[1], g.c[2]}, g.d, grad, false, &ws.bary[i]);
       }
     }
     for (int k = 0; k < 6; ++k) res.gradient[k] = grad[k];

@@ -23,12 +23,15 @@ DD_HOST_DEVICE ShadeBary shade_barycentrics(Vec3f d, const Vec3f X[3], bool clam
 }
 }  // namespace detail
 
-/// Colour and camera-space depth of triangle `tri` seen through pixel centre (px, py).
+/// Colour and camera-space depth of triangle `tri` seen through pixel centre (px, py). `bary_out` (optional)
+/// receives the barycentrics, so the backward pass need not recompute them.
 DD_HOST_DEVICE void shade_pixel(const MeshView& M, const ProjectedView& G, const Intrinsics& K, int tri, float px,
-                                float py, Vec3f* colour, float* depth, bool clamp = false) {
+                                float py, Vec3f* colour, float* depth, bool clamp = false,
+                                detail::ShadeBary* bary_out = nullptr) {
   const int* v = M.triangles + 3 * tri;
   const Vec3f X[3] = {G.cam[v[0]], G.cam[v[1]], G.cam[v[2]]};
   const detail::ShadeBary sb = detail::shade_barycentrics(pixel_ray(K, px, py), X, clamp);
+  if (bary_out) *bary_out = sb;
   const float* b = sb.b;
   *depth = b[0] * X[0].z + b[1] * X[1].z + b[2] * X[2].z;
   const int tex = M.tri_texture[tri];
@@ -41,14 +44,15 @@ DD_HOST_DEVICE void shade_pixel(const MeshView& M, const ProjectedView& G, const
 }
 
 /// Backward of shade_pixel: given dL/dcolour and dL/ddepth, accumulates dL/d(pose update) into grad6.
+/// `bary` (optional): the forward pass's barycentrics for this pixel and triangle.
 template <typename Acc>
 DD_HOST_DEVICE void shade_pixel_backward(const MeshView& M, const ProjectedView& G, const Intrinsics& K, int tri,
                                          float px, float py, Vec3f g_colour, float g_depth, Acc* grad6,
-                                         bool clamp = false) {
+                                         bool clamp = false, const detail::ShadeBary* bary = nullptr) {
   const int* v = M.triangles + 3 * tri;
   const Vec3f X[3] = {G.cam[v[0]], G.cam[v[1]], G.cam[v[2]]};
   const Vec3f d = pixel_ray(K, px, py);
-  const detail::ShadeBary sb = detail::shade_barycentrics(d, X, clamp);
+  const detail::ShadeBary sb = bary ? *bary : detail::shade_barycentrics(d, X, clamp);
   if (sb.s == 0.f) return;
   const float* b = sb.b;
   float g_b[3];

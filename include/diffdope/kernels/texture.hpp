@@ -23,9 +23,12 @@ struct TextureView {
 /// are about one pixel wide (round(log2(sqrt(texel_area / pixel_area)))). Sampling a finer level would alias
 /// (texel noise instead of the filtered colour a camera sees) and miss the cache on large textures.
 DD_HOST_DEVICE int mip_level(float texel_area, float pixel_area, int levels) {
-  if (!(pixel_area > 0.f) || !(texel_area > pixel_area)) return 0;
-  const int l = static_cast<int>(floorf(0.5f * log2f(texel_area / pixel_area) + 0.5f));
-  return l < 0 ? 0 : (l >= levels ? levels - 1 : l);
+  if (!(pixel_area > 0.f)) return 0;
+  // round(0.5 * log2(r)) >= l  <=>  r >= 2 * 4^(l-1): count thresholds instead of calling log2 per triangle.
+  const float r = texel_area / pixel_area;
+  int l = 0;
+  for (float threshold = 2.f; l + 1 < levels && r >= threshold; threshold *= 4.f) ++l;
+  return l;
 }
 
 /// Samples tex at uv. If d_du / d_dv are non-null they receive d(colour)/du and d(colour)/dv.
