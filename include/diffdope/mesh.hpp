@@ -80,4 +80,9 @@ class Mesh {
   std::vector<float> tri_uv_area_;
 };
 
+/// Writes an ASCII PLY (BOP layout: positions times `units_per_metre`, e.g. 1000 for millimetres; texture_u/v and
+/// `comment TextureFile <stem>.png` written next to it when textured, else vertex colours). Only the first texture
+/// is written. Throws std::runtime_error naming the file.
+void save_ply(const Mesh& mesh, const std::string& path, double units_per_metre);
+
 }  // namespace diffdope

@@ -17,8 +17,26 @@ struct SyntheticNoise {
   double brightness = 1.0;         // multiplies the object's colours (lighting mismatch)
 };
 
-/// Renders `mesh` at `pose` over a textured background plane and adds noise. The mask is the object's
-/// rendered coverage >= 0.5 (binary, 0/1).
+struct SceneObject {
+  const Mesh* mesh;
+  Pose pose;
+};
+
+/// A composed scene: one image of several objects occluding each other over a textured background.
+struct SyntheticScene {
+  cv::Mat rgb;                         // CV_32FC3 in [0, 1]
+  cv::Mat depth;                       // CV_32FC1 metres, 0 = hole
+  std::vector<cv::Mat> visible_masks;  // per object, CV_32FC1 0/1: the pixels where it is the front surface
+  std::vector<cv::Mat> full_masks;     // per object, its whole silhouette
+  std::vector<double> visible_fraction;
+};
+
+/// Renders the objects, composites them front to back (antialiased edges) over a textured background plane and
+/// adds noise.
+SyntheticScene synthesize_scene(Renderer& renderer, const Camera& camera, const std::vector<SceneObject>& objects,
+                                const SyntheticNoise& noise, uint32_t seed);
+
+/// One object alone (synthesize_scene with one object); the mask is its rendered coverage >= 0.5 (0/1).
 Observation synthesize_observation(Renderer& renderer, const Camera& camera, const Mesh& mesh, const Pose& pose,
                                    const SyntheticNoise& noise, uint32_t seed);
 

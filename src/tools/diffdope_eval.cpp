@@ -1,6 +1,9 @@
 // diffdope_eval: the paper's evaluation protocol on a BOP-format dataset.
 //   diffdope_eval --bop ROOT --split NAME --perturbations DIR --out results.jsonl [--levels easy,medium,hard]
-//                 [--config FILE] [--summary-json FILE] [--threads N] [--max-samples N]
+//                 [--config FILE] [--summary-json FILE] [--threads N] [--max-samples N] [--generate N [--seed S]]
+// --generate N first writes perturbation files into DIR with the paper's rule (random axis, rotate by exactly
+// the angle; random direction, translate by exactly the distance): easy (1 deg, 1 mm), medium (10 deg, 10 mm),
+// hard (40 deg, 20 mm), N samples per level for every ground-truth instance of image 0 of each scene.
 // Refines every perturbed initial pose, scores ADD (ADD-S for symmetric objects), writes one JSON line per
 // refined instance and prints a table per level: AUC of ADD(-S) up to 50 mm for initial and refined poses,
 // % under 10 mm and 5 mm, median ms per object.
@@ -17,6 +20,8 @@
 #include "diffdope/bop.hpp"
 #include "diffdope/metrics.hpp"
 #include "diffdope/refiner.hpp"
+#include "diffdope/synthetic.hpp"
+#include <random>
 
 using namespace diffdope;
 namespace fs = std::filesystem;
@@ -26,7 +31,7 @@ namespace {
 int usage(int rc) {
   std::cerr << "usage: diffdope_eval --bop ROOT --split NAME --perturbations DIR --out results.jsonl\n"
                "                     [--levels easy,medium,hard] [--config FILE] [--summary-json FILE]\n"
-               "                     [--threads N] [--max-samples N]\n";
+               "                     [--threads N] [--max-samples N] [--generate N [--seed S]]\n";
   return rc;
 }
 
@@ -45,12 +50,48 @@ double median(std::vector<double> v) {
   return v[v.size() / 2];
 }
 
+void write_perturbations(BopDataset& data, const std::string& dir, int samples, uint64_t seed) {
+  std::mt19937_64 rng(seed);
+  const struct {
+    const char* file;
+    double deg, mm;
+  } levels[] = {{"scene_error_deg_001_trans_001.json", 1, 1},
+                {"scene_error_deg_010_trans_010.json", 10, 10},
+                {"scene_error_deg_040_trans_020.json", 40, 20}};
+  for (int scene : data.scene_ids()) {
+    char sname[16];
+    std::snprintf(sname, sizeof sname, "%06d", scene);
+    const BopImage img = data.image(scene, 0);
+    fs::create_directories(fs::path(dir) / sname);
+    for (const auto& l : levels) {
+      nlohmann::json j = nlohmann::json::object();
+      for (int s = 0; s < samples; ++s) {
+        nlohmann::json list = nlohmann::json::array();
+        for (const BopInstance& g : img.gt) {
+          if (!data.has_model(g.obj_id)) continue;
+          const Pose p = perturb_pose(g.pose, data.model(g.obj_id).center(), l.deg * M_PI / 180, l.mm * 1e-3, rng);
+          const auto r = p.rotation_rowmajor();
+          list.push_back({{"obj_id", g.obj_id},
+                          {"cam_R_m2c", std::vector<double>(r.begin(), r.end())},
+                          {"cam_t_m2c", {1e3 * p.t.x(), 1e3 * p.t.y(), 1e3 * p.t.z()}}});
+        }
+        j[std::to_string(s)] = list;
+      }
+      const std::string path = (fs::path(dir) / sname / l.file).string();
+      std::ofstream f(path);
+      if (!f) throw std::runtime_error(path + ": cannot write");
+      f << j.dump(1) << "\n";
+    }
+  }
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
   std::string root, split, pert_dir, out_path, config, summary_path;
   std::set<std::string> levels;
-  int threads = 0, max_samples = -1;
+  int threads = 0, max_samples = -1, generate = 0;
+  uint64_t seed = 1;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     if (a == "-h" || a == "--help") return usage(0);
@@ -67,6 +108,8 @@ int main(int argc, char** argv) {
     else if (a == "--summary-json") summary_path = v;
     else if (a == "--threads") threads = std::stoi(v);
     else if (a == "--max-samples") max_samples = std::stoi(v);
+    else if (a == "--generate") generate = std::stoi(v);
+    else if (a == "--seed") seed = std::stoull(v);
     else if (a == "--levels") {
       std::stringstream ss(v);
       for (std::string l; std::getline(ss, l, ',');) levels.insert(l);
@@ -82,6 +125,7 @@ int main(int argc, char** argv) {
     if (threads > 0) options.render.threads = threads;
     Refiner refiner(options);
     BopDataset data(root, split);
+    if (generate > 0) write_perturbations(data, pert_dir, generate, seed);
     std::ofstream out(out_path);
     if (!out) throw std::runtime_error(out_path + ": cannot write");
 
