@@ -11,10 +11,12 @@ struct Observation {
   cv::Mat rgb;    // CV_32FC3, RGB order, [0, 1]; empty = no colour
   cv::Mat depth;  // CV_32FC1, metres; 0 or NaN = no reading; empty = no depth
   cv::Mat mask;   // CV_32FC1, object weight S in [0, 1] (0/1 for a binary mask); empty = no mask
+  cv::Mat edges;  // CV_32FC1 in [0, 1], observed edge map (see observed_edges()); empty = no edge term
 
   bool has_rgb() const { return !rgb.empty(); }
   bool has_depth() const { return !depth.empty(); }
   bool has_mask() const { return !mask.empty(); }
+  bool has_edges() const { return !edges.empty(); }
 
   /// Throws std::invalid_argument naming the image and the problem (type, size mismatch with the camera).
   void validate(const Camera& camera) const;
@@ -23,6 +25,10 @@ struct Observation {
   /// border), depth averaged over the valid readings of each block (blocks less than half measured: no reading).
   Observation resized(const Camera& scaled_camera) const;
 };
+
+/// The paper's observed edge map: Canny edges of the grey image (thresholds `low`, `high` on 8-bit grey),
+/// softened by a Gaussian of `sigma` pixels and rescaled so that an edge line peaks at 1.
+cv::Mat observed_edges(const cv::Mat& rgb_float, double low = 50, double high = 150, double sigma = 1.0);
 
 /// Converts a colour image: 8UC3 / 16UC3 / 32FC3 (assumed RGB unless `bgr`), 8UC1 / 32FC1 grey.
 cv::Mat to_rgb_float(const cv::Mat& image, bool bgr, const std::string& what = "rgb");

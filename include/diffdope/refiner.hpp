@@ -3,6 +3,7 @@
 // run i with its own learning rate drawn from [lr_low, lr_high] and decayed as lr_i * lr_decay^(k/iters);
 // plain gradient descent, no momentum; the run with the lowest loss wins.
 #include <cstdint>
+#include <functional>
 #include <string>
 #include <vector>
 
@@ -90,6 +91,10 @@ class Refiner {
   /// empty; at least one of rgb or depth is needed), `camera` their intrinsics. Throws std::invalid_argument
   /// on unusable input (NaN pose, object behind the camera, images that do not match the camera).
   RefineResult refine(const Camera& camera, const Observation& observed, const Mesh& mesh, const Pose& initial);
+
+  /// Optional progress callback, called once per iteration of refine() (iteration 0..total, total = the
+  /// configured iterations) with the best loss of any run so far.
+  std::function<void(int iteration, int total, double best_loss)> on_iteration;
 
  private:
   RefinerOptions options_;

@@ -32,18 +32,22 @@ struct RenderOptions {
 ///   rgb   = mean over S of  cov*|I_c - R_c|_1/3 + (1 - cov)*rgb_miss            (colours in [0, 1])
 ///   depth = mean over S with a depth reading of  cov*min(|I_d - R_d|, tau)/tau + (1 - cov)   (tau = depth_truncation)
 ///   mask  = sum over pixels of |S - cov| / sum(S)   (mismatched area as a fraction of the object's area)
+///   edges = mean over S of |E_obs - E_render|, E_render = m / (m + edge_scale), m = |Sobel(grey of the render)|
+///           (only when the observation carries an edge map, see Observation::edges)
 /// where S is the observed mask (all ones when absent) and cov the antialiased coverage of the render.
 struct LossOptions {
   double weight_rgb = 1.0;
   double weight_depth = 1.0;
   double weight_mask = 1.0;
+  double weight_edges = 0.0;      // off unless asked for (see the README's figures)
+  double edge_scale = 0.4;        // Sobel magnitude at which E_render = 0.5 (about a grey step of 0.1)
   double rgb_miss = 0.5;          // cost of an observed object pixel the render misses (colour term)
   double depth_truncation = 0.05; // metres; larger depth errors (noise, occluders) count as tau
 };
 
 /// One hypothesis' loss: per-term means (unweighted), the weighted total, and d(total)/d(delta).
 struct LossValue {
-  double rgb = 0, depth = 0, mask = 0;
+  double rgb = 0, depth = 0, mask = 0, edges = 0;
   double total = 0;
   Vector6d gradient = Vector6d::Zero();  // [0..2] per metre of translation, [3..5] per radian (see pose.hpp)
 };

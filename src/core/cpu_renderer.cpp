@@ -7,6 +7,7 @@
 #include <opencv2/imgproc.hpp>
 #include <stdexcept>
 
+#include "diffdope/kernels/edges.hpp"
 #include "diffdope/kernels/pixel_loss.hpp"
 #include "diffdope/kernels/shade.hpp"
 #include "diffdope/kernels/silhouette.hpp"
@@ -41,6 +42,7 @@ struct Workspace {
   std::vector<int> tri;
   std::vector<PixelAttr> pre, post, g_pre, g_post;
   std::vector<detail::ShadeBary> bary;  // per pixel, for the backward pass
+  std::vector<float> grey, g_sobel_x, g_sobel_y;  // edge term
   std::vector<BlendEvent> events;
 };
 
@@ -304,6 +306,8 @@ void CpuRenderer::evaluate(const Camera& camera, const Mesh& mesh, const Observa
   P.k_mask = (obs.has_mask() && n_rgb > 0) ? static_cast<float>(loss.weight_mask / n_rgb) : 0.f;
   P.rgb_miss = static_cast<float>(loss.rgb_miss);
   P.depth_trunc = static_cast<float>(loss.depth_truncation);
+  const float k_edges = (obs.has_edges() && n_rgb > 0) ? static_cast<float>(loss.weight_edges / n_rgb) : 0.f;
+  const float edge_scale = static_cast<float>(loss.edge_scale);
 
   out.assign(poses.size(), LossValue());
   pool_.parallel_for(static_cast<int>(poses.size()), [&](int h, int worker) {
@@ -338,10 +342,43 @@ void CpuRenderer::evaluate(const Camera& camera, const Mesh& mesh, const Observa
         if (with_gradient) ws.g_post[i] = PixelAttr{g.cov, {g.c[0], g.c[1], g.c[2]}, g.d};
       }
     }
+    double sum_edges = 0;
+    if (k_edges != 0.f) {
+      // Edge term: compare the observed edge map with the render's differentiable edge map over S.
+      const int H = roi.height();
+      ws.grey.resize(N);
+      for (int i = 0; i < N; ++i) ws.grey[i] = (ws.post[i].c[0] + ws.post[i].c[1] + ws.post[i].c[2]) / 3.f;
+      if (with_gradient) {
+        ws.g_sobel_x.assign(N, 0.f);
+        ws.g_sobel_y.assign(N, 0.f);
+      }
+      for (int y = roi.y0; y < roi.y1; ++y) {
+        const float* mrow = obs.has_mask() ? obs.mask.ptr<float>(y) : nullptr;
+        const float* erow = obs.edges.ptr<float>(y);
+        for (int x = roi.x0; x < roi.x1; ++x) {
+          const float S = mrow ? mrow[x] : 1.f;
+          if (!(S > 0.f)) continue;
+          const int lx = x - roi.x0, ly = y - roi.y0;
+          float gx, gy;
+          const float e = edge_value(ws.grey.data(), W, H, lx, ly, edge_scale, &gx, &gy);
+          sum_edges += S * std::fabs(erow[x] - e);
+          if (with_gradient)
+            edge_value_backward(gx, gy, edge_scale, k_edges * S * signf(e - erow[x]), &ws.g_sobel_x[ly * W + lx],
+                                &ws.g_sobel_y[ly * W + lx]);
+        }
+      }
+      if (with_gradient)
+        for (int ly = 0; ly < H; ++ly)
+          for (int lx = 0; lx < W; ++lx) {
+            const float g = grey_gradient(ws.g_sobel_x.data(), ws.g_sobel_y.data(), W, H, lx, ly) / 3.f;
+            for (int ch = 0; ch < 3; ++ch) ws.g_post[ly * W + lx].c[ch] += g;
+          }
+    }
+    res.edges = n_rgb > 0 && k_edges != 0.f ? sum_edges / n_rgb : 0.0;
     res.rgb = n_rgb > 0 && obs.has_rgb() ? sum_rgb / n_rgb : 0.0;
     res.depth = n_depth > 0 ? sum_depth / n_depth : 0.0;
     res.mask = n_rgb > 0 && obs.has_mask() ? sum_mask / n_rgb : 0.0;
-    res.total = P.k_rgb * sum_rgb + P.k_depth * sum_depth + P.k_mask * sum_mask;
+    res.total = P.k_rgb * sum_rgb + P.k_depth * sum_depth + P.k_mask * sum_mask + k_edges * sum_edges;
     if (!with_gradient) return;
 
     double grad[6] = {0, 0, 0, 0, 0, 0};

@@ -32,8 +32,11 @@ void Observation::validate(const Camera& camera) const {
     throw std::invalid_argument("mask: expected CV_32FC1 in [0,1], got " + type_name(mask) + " (use to_mask_float)");
   check_size(rgb, camera, "rgb");
   check_size(depth, camera, "depth");
+  if (has_edges() && edges.type() != CV_32FC1)
+    throw std::invalid_argument("edges: expected CV_32FC1 in [0,1], got " + type_name(edges));
   check_size(mask, camera, "mask");
-  for (const cv::Mat* m : {&rgb, &depth, &mask})
+  check_size(edges, camera, "edges");
+  for (const cv::Mat* m : {&rgb, &depth, &mask, &edges})
     if (!m->empty() && !m->isContinuous())
       throw std::invalid_argument("observation images must be continuous in memory (clone() a sub-image)");
 }
@@ -46,6 +49,7 @@ Observation Observation::resized(const Camera& cam) const {
   const cv::Size size(cam.width, cam.height);
   if (has_rgb()) cv::resize(rgb, out.rgb, size, 0, 0, cv::INTER_AREA);
   if (has_mask()) cv::resize(mask, out.mask, size, 0, 0, cv::INTER_AREA);
+  if (has_edges()) cv::resize(edges, out.edges, size, 0, 0, cv::INTER_AREA);
   if (has_depth()) {
     cv::Mat valid = depth > 0.f, validf, sum, weight;
     valid.convertTo(validf, CV_32F, 1.0 / 255.0);
@@ -58,6 +62,21 @@ Observation Observation::resized(const Camera& cam) const {
     avg.copyTo(out.depth, enough);
   }
   return out;
+}
+
+cv::Mat observed_edges(const cv::Mat& rgb_float, double low, double high, double sigma) {
+  cv::Mat grey, grey8, canny, soft;
+  cv::cvtColor(rgb_float, grey, cv::COLOR_RGB2GRAY);
+  grey.convertTo(grey8, CV_8U, 255.0);
+  cv::Canny(grey8, canny, low, high, 3, true);
+  canny.convertTo(soft, CV_32F, 1.0 / 255.0);
+  if (sigma > 0) {
+    cv::GaussianBlur(soft, soft, cv::Size(0, 0), sigma);
+    // A straight one-pixel line blurred by a Gaussian peaks at 1 / (sqrt(2 pi) sigma): rescale it to 1.
+    soft *= std::sqrt(2 * M_PI) * sigma;
+    cv::min(soft, 1.0, soft);
+  }
+  return soft;
 }
 
 cv::Mat to_rgb_float(const cv::Mat& image, bool bgr, const std::string& what) {

@@ -68,6 +68,8 @@ RefineResult Refiner::refine(const Camera& camera, const Observation& observed, 
   const Camera cam = o.image_scale == 1.0 ? camera : camera.scaled(o.image_scale);
   Observation obs = o.image_scale == 1.0 ? observed : observed.resized(cam);
   LossOptions loss = o.loss;
+  // The paper's edge term: Canny edges of the observed image, computed at the refiner's scale.
+  if (loss.weight_edges > 0 && obs.has_rgb() && !obs.has_edges()) obs.edges = observed_edges(obs.rgb);
   const bool has_mask = obs.has_mask();
   if (has_mask) {
     if (cv::countNonZero(obs.mask > 0) == 0) throw std::invalid_argument("refine: the object mask is empty");
@@ -114,6 +116,7 @@ RefineResult Refiner::refine(const Camera& camera, const Observation& observed, 
                               })->total;
     if (round_best < best_overall * (1.0 - o.early_stop_tolerance)) improved = true;
     best_overall = std::min(best_overall, round_best);
+    if (on_iteration) on_iteration(k, iters, best_overall);
     stale = improved ? 0 : stale + 1;
     if (last || (o.early_stop_patience > 0 && stale >= o.early_stop_patience)) break;
     const double decay = std::pow(o.lr_decay, double(k) / iters);

@@ -48,6 +48,8 @@ RefinerOptions parse(const YAML::Node& root, RefinerOptions o, const std::string
       read(l, "weight_rgb", o.loss.weight_rgb, lu);
       read(l, "weight_depth", o.loss.weight_depth, lu);
       read(l, "weight_mask", o.loss.weight_mask, lu);
+      read(l, "weight_edges", o.loss.weight_edges, lu);
+      read(l, "edge_scale", o.loss.edge_scale, lu);
       read(l, "rgb_miss", o.loss.rgb_miss, lu);
       read(l, "depth_truncation", o.loss.depth_truncation, lu);
       reject_unknown(l, lu, origin + " (loss)");
@@ -113,7 +115,9 @@ void RefinerOptions::validate() const {
   if (!(lr_low > 0) || !(lr_high >= lr_low)) fail("need 0 < lr_low <= lr_high");
   if (!(lr_decay > 0) || lr_decay > 1) fail("lr_decay must be in (0, 1]");
   if (!(image_scale > 0) || image_scale > 4) fail("image_scale must be in (0, 4]");
-  if (loss.weight_rgb < 0 || loss.weight_depth < 0 || loss.weight_mask < 0) fail("loss weights must be >= 0");
+  if (loss.weight_rgb < 0 || loss.weight_depth < 0 || loss.weight_mask < 0 || loss.weight_edges < 0)
+    fail("loss weights must be >= 0");
+  if (!(loss.edge_scale > 0)) fail("loss.edge_scale must be > 0");
   if (!(loss.depth_truncation > 0)) fail("loss.depth_truncation must be > 0");
   if (early_stop_patience < 0) fail("early_stop_patience must be >= 0");
   if (device != "cpu" && device != "cuda" && device != "auto") fail("device must be auto, cpu or cuda");
