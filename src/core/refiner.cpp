@@ -96,34 +96,45 @@ RefineResult Refiner::refine(const Camera& camera, const Observation& observed, 
   for (auto& b : best) b.total = std::numeric_limits<double>::infinity();
   res.run_histories.assign(B, {});
   const double diameter = std::max(mesh.diameter(), 1e-6);
+  std::vector<int> active(B);  // runs still descending (successive halving drops the worst)
+  for (int i = 0; i < B; ++i) active[i] = i;
+  std::vector<Pose> batch;
   int stale = 0;
   double best_overall = std::numeric_limits<double>::infinity();
   int k = 0;
   for (; k <= iters; ++k) {
     const bool last = k == iters;
-    renderer_->evaluate(cam, mesh, obs, poses, loss, !last, values);
+    if (o.successive_halving && !last && active.size() > 1 && (k == iters / 4 || k == iters / 2)) {
+      std::stable_sort(active.begin(), active.end(), [&](int a, int b) { return best[a].total < best[b].total; });
+      active.resize((active.size() + 1) / 2);
+      std::sort(active.begin(), active.end());
+    }
+    batch.resize(active.size());
+    for (size_t j = 0; j < active.size(); ++j) batch[j] = poses[active[j]];
+    renderer_->evaluate(cam, mesh, obs, batch, loss, !last, values);
     if (k == 0) res.initial_loss = values[0].total;
-    bool improved = false;
-    for (int i = 0; i < B; ++i) {
-      res.run_histories[i].push_back(values[i].total);
-      if (values[i].total < best[i].total) {
-        best[i] = values[i];
+    for (size_t j = 0; j < active.size(); ++j) {
+      const int i = active[j];
+      res.run_histories[i].push_back(values[j].total);
+      if (values[j].total < best[i].total) {
+        best[i] = values[j];
         best_pose[i] = poses[i];
       }
     }
     const double round_best = std::min_element(best.begin(), best.end(), [](auto& a, auto& b) {
                                 return a.total < b.total;
                               })->total;
-    if (round_best < best_overall * (1.0 - o.early_stop_tolerance)) improved = true;
+    const bool improved = round_best < best_overall * (1.0 - o.early_stop_tolerance);
     best_overall = std::min(best_overall, round_best);
     if (on_iteration) on_iteration(k, iters, best_overall);
     stale = improved ? 0 : stale + 1;
     if (last || (o.early_stop_patience > 0 && stale >= o.early_stop_patience)) break;
     const double decay = std::pow(o.lr_decay, double(k) / iters);
-    for (int i = 0; i < B; ++i) {
-      if (!std::isfinite(values[i].total)) continue;  // a run that left the image keeps its pose
+    for (size_t j = 0; j < active.size(); ++j) {
+      const int i = active[j];
+      if (!std::isfinite(values[j].total)) continue;  // a run that left the image keeps its pose
       const Eigen::Vector3d pivot = poses[i] * mesh.center();
-      poses[i] = refiner_step(poses[i], values[i].gradient, res.learning_rates[i] * decay, diameter, pivot);
+      poses[i] = refiner_step(poses[i], values[j].gradient, res.learning_rates[i] * decay, diameter, pivot);
     }
   }
   res.iterations = std::min(k, iters);
@@ -144,7 +155,8 @@ RefineResult Refiner::refine(const Camera& camera, const Observation& observed, 
     res.mask_iou = uni > 0 ? inter / uni : 0.0;
   }
   if (obs.has_depth()) {
-    const cv::Mat object = (obs.mask >= 0.5f) & (obs.depth > 0);
+    // Over the observed object, or (without a mask) over what the render covers: the window is not the object.
+    const cv::Mat object = (has_mask ? cv::Mat(obs.mask >= 0.5f) : rendered) & (obs.depth > 0);
     const int n = cv::countNonZero(object);
     cv::Mat diff;
     cv::absdiff(obs.depth, img.depth, diff);

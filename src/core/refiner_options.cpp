@@ -35,6 +35,7 @@ RefinerOptions parse(const YAML::Node& root, RefinerOptions o, const std::string
     read(root, "lr_decay", o.lr_decay, used);
     read(root, "image_scale", o.image_scale, used);
     read(root, "seed", o.seed, used);
+    read(root, "successive_halving", o.successive_halving, used);
     read(root, "early_stop_patience", o.early_stop_patience, used);
     read(root, "early_stop_tolerance", o.early_stop_tolerance, used);
     read(root, "no_mask_window", o.no_mask_window, used);

@@ -1,0 +1,768 @@
+// diffdope_refine: refines the pose of one object in one image, everything read from files.
+//   diffdope_refine --rgb FILE --camera FILE --mesh FILE --init FILE --out DIR [--depth FILE] [--depth-scale M]
+//                   [--mask FILE] [--mesh-scale S] [--config FILE] [--quiet]
+// Writes DIR/pose.json (refined pose and scores), DIR/overlay.png (initial pose red, refined green) and
+// DIR/losses.png (loss per iteration of every run, the winner highlighted); prints the pose and the timing.
+// Every unusable input is reported as one line `diffdope_refine: <file>: <problem>` with exit code 1; command-line
+// mistakes print the usage with exit code 2.
+#include <fcntl.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <iostream>
+#include <limits>
+#include <nlohmann/json.hpp>
+#include <opencv2/core/utils/logger.hpp>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+#include <sstream>
+#include <stdexcept>
+#include <string>
+#include <vector>
+#include <yaml-cpp/yaml.h>
+
+#include "diffdope/refiner.hpp"
+
+using namespace diffdope;
+namespace fs = std::filesystem;
+using json = nlohmann::json;
+
+namespace {
+
+const char* kUsage =
+    "usage: diffdope_refine --rgb FILE --camera FILE --mesh FILE --init FILE --out DIR\n"
+    "                       [--depth FILE] [--depth-scale M] [--mask FILE] [--mesh-scale S] [--config FILE] [--quiet]\n"
+    "\n"
+    "  --rgb FILE        colour or grey image (8/16-bit, anything OpenCV reads)\n"
+    "  --camera FILE     intrinsics of the (rectified) image, .json or .yaml/.yml: fx, fy, cx, cy[, width, height],\n"
+    "                    or a 3x3 matrix as BOP's cam_K (9 values, row-major), K / k or camera_matrix: {data: [...]}\n"
+    "  --mesh FILE       textured model (PLY incl. `comment TextureFile`, OBJ+MTL, glTF/GLB, ...)\n"
+    "  --init FILE       initial pose (model to camera, metres), JSON: {\"R\": [9 row-major], \"t\": [3]},\n"
+    "                    {\"quaternion\": [x, y, z, w], \"t\": [3]} or {\"matrix\": [16 row-major] or [[4] x 4]}\n"
+    "  --out DIR         output folder (created): pose.json, overlay.png, losses.png\n"
+    "  --depth FILE      depth image, one channel, 16-bit or float\n"
+    "  --depth-scale M   metres per depth unit (default 0.001: millimetres)\n"
+    "  --mask FILE       object mask, nonzero = object\n"
+    "  --mesh-scale S    metres per model unit (default 1; 0.001 for millimetre models such as BOP's)\n"
+    "  --config FILE     refiner options YAML (see config/default.yaml)\n"
+    "  --quiet           no progress bar and no summary on stdout\n";
+
+/// An input that cannot be used: `file` is the file (or folder) to name in the message.
+struct InputError : std::runtime_error {
+  std::string file;
+  InputError(std::string f, const std::string& what) : std::runtime_error(what), file(std::move(f)) {}
+};
+
+[[noreturn]] void fail(const std::string& file, const std::string& what) { throw InputError(file, what); }
+
+/// Library messages often start with the file name already; drop that so the file is named once.
+std::string strip_file_prefix(std::string msg, const std::string& file) {
+  for (const std::string& p : {file + ": ", "Mesh::load('" + file + "'): "})
+    if (msg.rfind(p, 0) == 0) msg = msg.substr(p.size());
+  return msg;
+}
+
+std::string one_line(std::string s) {
+  for (char& c : s)
+    if (c == '\n' || c == '\r') c = ' ';
+  while (!s.empty() && s.back() == ' ') s.pop_back();
+  return s;
+}
+
+/// Runs `f`, turning any exception into an InputError naming `file`.
+template <typename F>
+auto about(const std::string& file, F&& f) -> decltype(f()) {
+  try {
+    return f();
+  } catch (const InputError&) {
+    throw;
+  } catch (const std::exception& e) {
+    fail(file, strip_file_prefix(e.what(), file));
+  }
+}
+
+std::string lower(std::string s) {
+  std::transform(s.begin(), s.end(), s.begin(), [](unsigned char c) { return char(std::tolower(c)); });
+  return s;
+}
+
+/// Silences stderr while alive: image decoders (libpng, libjpeg) and assimp print their own complaints about
+/// corrupt files there, which would break our one-line error reports. The error itself is reported by us.
+class QuietStderr {
+ public:
+  QuietStderr() {
+    std::fflush(stderr);
+    saved_ = dup(2);
+    const int null = open("/dev/null", O_WRONLY);
+    if (saved_ >= 0 && null >= 0) dup2(null, 2);
+    if (null >= 0) close(null);
+  }
+  ~QuietStderr() {
+    std::fflush(stderr);
+    if (saved_ >= 0) {
+      dup2(saved_, 2);
+      close(saved_);
+    }
+  }
+  QuietStderr(const QuietStderr&) = delete;
+  QuietStderr& operator=(const QuietStderr&) = delete;
+
+ private:
+  int saved_ = -1;
+};
+
+void check_file(const std::string& path) {
+  std::error_code ec;
+  if (!fs::exists(path, ec)) fail(path, "file does not exist");
+  if (fs::is_directory(path, ec)) fail(path, "is a directory, expected a file");
+  std::ifstream probe(path, std::ios::binary);
+  if (!probe) fail(path, "cannot open the file for reading");
+}
+
+cv::Mat read_image(const std::string& path, int flags, const std::string& kind) {
+  check_file(path);
+  cv::Mat img;
+  try {
+    QuietStderr quiet;
+    img = cv::imread(path, flags);
+  } catch (const std::exception& e) {
+    fail(path, "cannot decode the " + kind + " image (" + one_line(e.what()) + ")");
+  }
+  if (img.empty()) fail(path, "cannot read it as an image (corrupt file or unsupported format)");
+  return img;
+}
+
+std::string fmt(double v, const char* f = "%.6f") {
+  char b[64];
+  std::snprintf(b, sizeof b, f, v);
+  return b;
+}
+
+std::string size_str(int w, int h) { return std::to_string(w) + "x" + std::to_string(h); }
+
+// ---- JSON / YAML helpers ----
+
+json read_json_file(const std::string& path) {
+  check_file(path);
+  std::ifstream in(path);
+  try {
+    return json::parse(in);
+  } catch (const json::exception& e) {
+    std::string m = e.what();
+    const size_t b = m.find("] ");
+    if (m.rfind("[json.exception", 0) == 0 && b != std::string::npos) m = m.substr(b + 2);
+    fail(path, "invalid JSON: " + m);
+  }
+}
+
+json yaml_to_json(const YAML::Node& n) {
+  switch (n.Type()) {
+    case YAML::NodeType::Map: {
+      json j = json::object();
+      for (const auto& kv : n) j[kv.first.as<std::string>()] = yaml_to_json(kv.second);
+      return j;
+    }
+    case YAML::NodeType::Sequence: {
+      json j = json::array();
+      for (const auto& e : n) j.push_back(yaml_to_json(e));
+      return j;
+    }
+    case YAML::NodeType::Scalar: {
+      try {
+        return n.as<double>();
+      } catch (const YAML::Exception&) {
+        return n.as<std::string>();
+      }
+    }
+    default:
+      return nullptr;
+  }
+}
+
+json read_yaml_file(const std::string& path) {
+  check_file(path);
+  try {
+    return yaml_to_json(YAML::LoadFile(path));
+  } catch (const YAML::Exception& e) {
+    fail(path, std::string("invalid YAML: ") + e.what());
+  }
+}
+
+/// Numbers of `key`: a flat array, an array of arrays (rows), or an object with a `data` array (ROS yaml).
+std::vector<double> numbers(const json& j, const std::string& key, const std::string& file) {
+  std::vector<double> out;
+  const json& v = (j.is_object() && j.contains("data")) ? j.at("data") : j;
+  auto add = [&](const json& x) {
+    if (!x.is_number()) fail(file, "'" + key + "' must hold numbers, found " + x.dump());
+    const double d = x.get<double>();
+    if (!std::isfinite(d)) fail(file, "'" + key + "' holds a value that is not finite (" + x.dump() + ")");
+    out.push_back(d);
+  };
+  if (v.is_number()) {
+    add(v);
+  } else if (v.is_array()) {
+    for (const json& e : v) {
+      if (e.is_array()) {
+        for (const json& x : e) add(x);
+      } else {
+        add(e);
+      }
+    }
+  } else {
+    fail(file, "'" + key + "' must be a number or an array of numbers, found " + v.dump());
+  }
+  return out;
+}
+
+std::vector<double> numbers_n(const json& j, const std::string& key, size_t n, const std::string& file) {
+  if (!j.contains(key)) fail(file, "missing key '" + key + "'");
+  std::vector<double> v = numbers(j.at(key), key, file);
+  if (v.size() != n)
+    fail(file, "'" + key + "' needs " + std::to_string(n) + " values, found " + std::to_string(v.size()));
+  return v;
+}
+
+double number(const json& j, const std::string& key, const std::string& file) {
+  return numbers_n(j, key, 1, file)[0];
+}
+
+// ---- Camera ----
+
+Camera read_camera(const std::string& path, int image_width, int image_height) {
+  const std::string ext = lower(fs::path(path).extension().string());
+  json j;
+  if (ext == ".json") j = read_json_file(path);
+  else if (ext == ".yaml" || ext == ".yml") j = read_yaml_file(path);
+  else {
+    check_file(path);
+    fail(path, "unknown camera file type '" + ext + "' (expected .json, .yaml or .yml)");
+  }
+  if (!j.is_object()) fail(path, "expected a mapping of camera parameters");
+  const std::vector<std::string> matrix_keys = {"cam_K", "K", "k", "camera_matrix"};
+  auto has_intrinsics = [&](const json& o) {
+    if (o.contains("fx")) return true;
+    for (const auto& k : matrix_keys)
+      if (o.contains(k)) return true;
+    return false;
+  };
+  // A BOP scene_camera.json with a single image: {"0": {"cam_K": [...], ...}}.
+  if (!has_intrinsics(j) && j.size() == 1 && j.begin().value().is_object() && has_intrinsics(j.begin().value())) {
+    const json inner = j.begin().value();
+    j = inner;
+  } else if (!has_intrinsics(j) && j.size() > 1 && j.begin().value().is_object() &&
+             has_intrinsics(j.begin().value())) {
+    fail(path, "holds " + std::to_string(j.size()) +
+                   " cameras (a BOP scene_camera.json?); give a file with the one camera of this image");
+  }
+  Camera cam;
+  if (j.contains("fx")) {
+    cam.fx = number(j, "fx", path);
+    cam.fy = number(j, "fy", path);
+    cam.cx = number(j, "cx", path);
+    cam.cy = number(j, "cy", path);
+  } else {
+    std::string key;
+    for (const auto& k : matrix_keys)
+      if (j.contains(k)) {
+        key = k;
+        break;
+      }
+    if (key.empty())
+      fail(path, "missing key 'fx' (expected fx, fy, cx, cy[, width, height] or BOP's cam_K: 9 values)");
+    const std::vector<double> K = numbers_n(j, key, 9, path);
+    if (std::abs(K[6]) > 1e-9 || std::abs(K[7]) > 1e-9 || std::abs(K[8] - 1.0) > 1e-9)
+      fail(path, "'" + key + "' is not an intrinsic matrix (its last row must be 0 0 1)");
+    if (std::abs(K[3]) > 1e-9) fail(path, "'" + key + "' is not an intrinsic matrix (K[1][0] must be 0)");
+    if (std::abs(K[1]) > 1e-3 * std::abs(K[0]))
+      fail(path, "'" + key + "' has a skew term (K[0][1] = " + std::to_string(K[1]) + "), which is not supported");
+    cam.fx = K[0];
+    cam.fy = K[4];
+    cam.cx = K[2];
+    cam.cy = K[5];
+  }
+  if (!(cam.fx > 0) || !(cam.fy > 0)) fail(path, "focal lengths must be positive");
+  // Size: width/height (ROS: image_width/image_height) when given, else the image's.
+  auto size_key = [&](const char* a, const char* b) -> std::string {
+    return j.contains(a) ? a : (j.contains(b) ? b : "");
+  };
+  const std::string wk = size_key("width", "image_width"), hk = size_key("height", "image_height");
+  if (wk.empty() != hk.empty()) fail(path, "give both width and height, or neither");
+  cam.width = image_width;
+  cam.height = image_height;
+  if (!wk.empty()) {
+    const double w = number(j, wk, path), h = number(j, hk, path);
+    if (w != std::floor(w) || h != std::floor(h) || w < 0 || h < 0 || w > 1e6 || h > 1e6)
+      fail(path, "width and height must be positive integers");
+    // ROS camera_info leaves both 0 when unknown: then the image decides.
+    if (!(w == 0 && h == 0) && (int(w) != image_width || int(h) != image_height))
+      fail(path, "camera size " + size_str(int(w), int(h)) + " does not match the rgb image (" +
+                     size_str(image_width, image_height) + ")");
+  }
+  about(path, [&] { cam.validate(); });
+  return cam;
+}
+
+// ---- Initial pose ----
+
+Pose read_init(const std::string& path) {
+  const json j = read_json_file(path);
+  if (!j.is_object()) fail(path, "expected a JSON object with R + t, quaternion + t, or matrix");
+  const int forms = int(j.contains("R")) + int(j.contains("quaternion")) + int(j.contains("matrix"));
+  if (forms == 0) fail(path, "expected one of {\"R\": [9], \"t\": [3]}, {\"quaternion\": [x,y,z,w], \"t\": [3]}, "
+                             "{\"matrix\": [16]}");
+  if (forms > 1) fail(path, "give only one of R, quaternion or matrix");
+  Pose pose;
+  const char* rot_key = "R";
+  if (j.contains("matrix")) {
+    rot_key = "matrix";
+    const std::vector<double> m = numbers_n(j, "matrix", 16, path);
+    Eigen::Matrix4d T;
+    for (int i = 0; i < 16; ++i) T(i / 4, i % 4) = m[i];
+    if ((T.row(3) - Eigen::RowVector4d(0, 0, 0, 1)).cwiseAbs().maxCoeff() > 1e-6)
+      fail(path, "'matrix' is not a rigid transform (its last row must be 0 0 0 1)");
+    pose = Pose::from_matrix(T);
+  } else {
+    const std::vector<double> t = numbers_n(j, "t", 3, path);
+    const Eigen::Vector3d tv(t[0], t[1], t[2]);
+    if (j.contains("R")) {
+      const std::vector<double> r = numbers_n(j, "R", 9, path);
+      std::array<double, 9> a;
+      std::copy(r.begin(), r.end(), a.begin());
+      pose = Pose::from_rotation_rowmajor(a, tv);
+    } else {
+      rot_key = "quaternion";
+      const std::vector<double> q = numbers_n(j, "quaternion", 4, path);
+      const double norm = std::sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]);
+      if (std::abs(norm - 1.0) > 1e-2)
+        fail(path, "'quaternion' has norm " + std::to_string(norm) + ", expected a unit quaternion [x, y, z, w]");
+      pose = Pose::from_quaternion(q[0], q[1], q[2], q[3], tv);
+    }
+  }
+  if (!pose.R.allFinite() || !pose.t.allFinite()) fail(path, "the pose holds values that are not finite");
+  const double ortho = (pose.R.transpose() * pose.R - Eigen::Matrix3d::Identity()).cwiseAbs().maxCoeff();
+  if (ortho > 1e-3)
+    fail(path, std::string("the rotation in '") + rot_key + "' is not orthonormal (|R^T R - I| = " +
+                   std::to_string(ortho) + ")");
+  if (pose.R.determinant() < 0) fail(path, std::string("the rotation in '") + rot_key + "' is a reflection (det -1)");
+  pose.orthonormalize();
+  return pose;
+}
+
+/// The initial pose must put the object in front of the camera and (at least partly) in the image.
+void check_init_in_view(const std::string& path, const Pose& pose, const Mesh& mesh, const std::string& mesh_path,
+                        const Camera& cam, double near_plane) {
+  // The camera inside the model's box: nothing sensible to refine; usually a millimetre model read as metres.
+  const Eigen::Vector3d eye = pose.inverse().t;  // camera centre in model coordinates
+  if ((eye.array() > mesh.bbox_min().array()).all() && (eye.array() < mesh.bbox_max().array()).all()) {
+    if (mesh.diameter() > 5.0)
+      fail(mesh_path, "the model is " + fmt(mesh.diameter(), "%.1f") +
+                          " m across and the camera is inside it at the initial pose (a millimetre model? use "
+                          "--mesh-scale 0.001)");
+    fail(path, "the initial pose puts the camera inside the object's bounding box");
+  }
+  const Eigen::Vector3d c = pose * mesh.center();
+  const std::string hint = pose.t.norm() > 20 ? " (t is in metres: was it given in millimetres?)" : "";
+  if (!(c.z() > near_plane))
+    fail(path, "the initial pose puts the object behind the camera (centre z = " + std::to_string(c.z()) + " m)" +
+                   hint);
+  double x0 = 1e300, y0 = 1e300, x1 = -1e300, y1 = -1e300;
+  for (const auto& p : mesh.bbox_corners()) {
+    const Eigen::Vector3d X = pose * p;
+    if (X.z() <= 1e-6) return;  // straddles the camera plane: let the refiner judge
+    const double u = cam.fx * X.x() / X.z() + cam.cx, v = cam.fy * X.y() / X.z() + cam.cy;
+    x0 = std::min(x0, u), x1 = std::max(x1, u), y0 = std::min(y0, v), y1 = std::max(y1, v);
+  }
+  if (x1 < -0.5 || y1 < -0.5 || x0 > cam.width - 0.5 || y0 > cam.height - 0.5)
+    fail(path, "the initial pose puts the object outside the image (centre projects to (" +
+                   std::to_string(cam.fx * c.x() / c.z() + cam.cx) + ", " +
+                   std::to_string(cam.fy * c.y() / c.z() + cam.cy) + "))" + hint);
+}
+
+// ---- Outputs ----
+
+void write_image(const std::string& path, const cv::Mat& img) {
+  bool ok = false;
+  try {
+    ok = cv::imwrite(path, img);
+  } catch (const std::exception& e) {
+    fail(path, std::string("cannot write: ") + one_line(e.what()));
+  }
+  if (!ok) fail(path, "cannot write the image");
+}
+
+cv::Mat to_bgr8(const cv::Mat& rgb_float) {
+  cv::Mat bgr;
+  cv::cvtColor(rgb_float, bgr, cv::COLOR_RGB2BGR);
+  bgr.convertTo(bgr, CV_8UC3, 255.0);
+  return bgr;
+}
+
+/// Translucent render (colour where coverage > 0.5, alpha 0.35) and its outline in `colour`.
+void draw_render(cv::Mat& bgr8, const RenderImage& img, const cv::Scalar& colour, int thickness) {
+  const double alpha = 0.35;
+  for (int y = 0; y < bgr8.rows; ++y) {
+    const float* cov = img.coverage.ptr<float>(y);
+    const cv::Vec3f* col = img.color.ptr<cv::Vec3f>(y);
+    cv::Vec3b* out = bgr8.ptr<cv::Vec3b>(y);
+    for (int x = 0; x < bgr8.cols; ++x) {
+      if (!(cov[x] > 0.5f)) continue;
+      for (int c = 0; c < 3; ++c) {
+        const double r = std::clamp(double(col[x][2 - c]) / cov[x], 0.0, 1.0) * 255.0;  // unpremultiply, RGB->BGR
+        out[x][c] = cv::saturate_cast<uchar>((1 - alpha) * out[x][c] + alpha * r);
+      }
+    }
+  }
+  std::vector<std::vector<cv::Point>> contours;
+  cv::findContours(cv::Mat(img.coverage >= 0.5f), contours, cv::RETR_EXTERNAL, cv::CHAIN_APPROX_NONE);
+  cv::drawContours(bgr8, contours, -1, colour, thickness, cv::LINE_AA);
+}
+
+void put_label(cv::Mat& img, const std::string& text, cv::Point at, const cv::Scalar& colour, double scale) {
+  cv::putText(img, text, at, cv::FONT_HERSHEY_SIMPLEX, scale, cv::Scalar(0, 0, 0), 3, cv::LINE_AA);
+  cv::putText(img, text, at, cv::FONT_HERSHEY_SIMPLEX, scale, colour, 1, cv::LINE_AA);
+}
+
+cv::Mat make_overlay(const Observation& obs, Renderer& renderer, const Camera& cam, const Mesh& mesh,
+                     const Pose& initial, const Pose& refined) {
+  cv::Mat bgr = to_bgr8(obs.rgb);
+  const auto imgs = renderer.render(cam, mesh, {initial, refined});
+  const int thickness = std::max(1, int(std::lround(std::max(cam.width, cam.height) / 500.0)));
+  draw_render(bgr, imgs[0], cv::Scalar(0, 0, 255), thickness);
+  draw_render(bgr, imgs[1], cv::Scalar(0, 255, 0), thickness);
+  const double s = std::clamp(cam.width / 900.0, 0.35, 1.2);
+  const int line = int(std::lround(30 * s)) + 4;
+  put_label(bgr, "initial", cv::Point(8, line), cv::Scalar(0, 0, 255), s);
+  put_label(bgr, "refined", cv::Point(8, 2 * line), cv::Scalar(0, 255, 0), s);
+  return bgr;
+}
+
+/// "Nice" tick step (1, 2 or 5 times a power of ten) for about `n` ticks over `range`.
+double nice_step(double range, int n) {
+  const double raw = range / std::max(1, n);
+  const double p = std::pow(10.0, std::floor(std::log10(raw)));
+  for (double m : {1.0, 2.0, 5.0})
+    if (m * p >= raw) return m * p;
+  return 10 * p;
+}
+
+std::string tick_label(double v) {
+  char b[32];
+  std::snprintf(b, sizeof b, "%.3g", v);
+  return b;
+}
+
+cv::Mat make_loss_plot(const RefineResult& r) {
+  const int W = 800, H = 500, L = 80, R = W - 25, T = 50, B = H - 55;
+  cv::Mat img(H, W, CV_8UC3, cv::Scalar(255, 255, 255));
+  double lo = std::numeric_limits<double>::infinity(), hi = -lo;
+  size_t n = 0;
+  for (const auto& h : r.run_histories) {
+    n = std::max(n, h.size());
+    for (double v : h)
+      if (std::isfinite(v)) lo = std::min(lo, v), hi = std::max(hi, v);
+  }
+  for (double v : r.history)
+    if (std::isfinite(v)) lo = std::min(lo, v), hi = std::max(hi, v);
+  n = std::max(n, r.history.size());
+  const cv::Scalar black(0, 0, 0), grid(232, 232, 232), light(195, 195, 195), strong(200, 90, 0);
+  const auto font = cv::FONT_HERSHEY_SIMPLEX;
+  std::string title = "Loss per iteration: " + std::to_string(r.run_histories.size()) + " runs (grey), winner #" +
+                      std::to_string(r.winner) + " (blue)";
+  cv::putText(img, title, cv::Point(L, 30), font, 0.6, black, 1, cv::LINE_AA);
+  if (!std::isfinite(lo)) {
+    cv::putText(img, "no finite loss values", cv::Point(L + 20, (T + B) / 2), font, 0.6, black, 1, cv::LINE_AA);
+    return img;
+  }
+  const bool log_scale = lo > 0 && hi > 10 * lo;
+  if (!log_scale) {
+    if (hi - lo < 1e-12 * std::max(1.0, std::abs(hi))) {  // flat: give it some room
+      const double pad = std::max(1e-3, 0.1 * std::abs(hi));
+      lo -= pad, hi += pad;
+    } else {
+      const double pad = 0.05 * (hi - lo);
+      lo = lo >= 0 ? std::max(0.0, lo - pad) : lo - pad;
+      hi += pad;
+    }
+  }
+  auto f = [&](double v) { return log_scale ? std::log10(v) : v; };
+  const double flo = log_scale ? std::log10(lo) - 0.05 : f(lo), fhi = log_scale ? std::log10(hi) + 0.05 : f(hi);
+  const double xmax = std::max<double>(1, double(n) - 1);
+  auto px = [&](double i) { return L + (R - L) * i / xmax; };
+  auto py = [&](double v) { return B - (B - T) * (f(v) - flo) / (fhi - flo); };
+
+  // Y ticks and grid.
+  std::vector<double> yt;
+  if (log_scale) {
+    const int e0 = int(std::floor(flo)), e1 = int(std::ceil(fhi));
+    const bool dense = e1 - e0 <= 3;
+    for (int e = e0; e <= e1; ++e)
+      for (double m : {1.0, 2.0, 5.0}) {
+        if (!dense && m != 1.0) continue;
+        const double v = m * std::pow(10.0, e);
+        if (std::log10(v) >= flo && std::log10(v) <= fhi) yt.push_back(v);
+      }
+  } else {
+    const double step = nice_step(hi - lo, 5);
+    for (double v = std::ceil(lo / step) * step; v <= hi + 1e-9 * step; v += step) yt.push_back(v);
+  }
+  for (double v : yt) {
+    const int y = int(std::lround(py(v)));
+    cv::line(img, cv::Point(L, y), cv::Point(R, y), grid, 1);
+    cv::line(img, cv::Point(L - 5, y), cv::Point(L, y), black, 1);
+    const std::string s = tick_label(std::abs(v) < 1e-12 ? 0.0 : v);
+    int base = 0;
+    const cv::Size ts = cv::getTextSize(s, font, 0.45, 1, &base);
+    cv::putText(img, s, cv::Point(L - 8 - ts.width, y + ts.height / 2), font, 0.45, black, 1, cv::LINE_AA);
+  }
+  // X ticks and grid.
+  const double xs = std::max(1.0, nice_step(xmax, 8));
+  for (double i = 0; i <= xmax + 1e-9; i += xs) {
+    const int x = int(std::lround(px(i)));
+    cv::line(img, cv::Point(x, T), cv::Point(x, B), grid, 1);
+    cv::line(img, cv::Point(x, B), cv::Point(x, B + 5), black, 1);
+    const std::string s = tick_label(i);
+    int base = 0;
+    const cv::Size ts = cv::getTextSize(s, font, 0.45, 1, &base);
+    cv::putText(img, s, cv::Point(x - ts.width / 2, B + 20), font, 0.45, black, 1, cv::LINE_AA);
+  }
+  // Curves: every run in grey, then the winner on top.
+  auto curve = [&](const std::vector<double>& h, const cv::Scalar& c, int thick) {
+    for (size_t i = 1; i < h.size(); ++i) {
+      if (!std::isfinite(h[i - 1]) || !std::isfinite(h[i])) continue;
+      if (log_scale && (h[i - 1] <= 0 || h[i] <= 0)) continue;
+      const cv::Point2d a(px(double(i - 1)), py(h[i - 1])), b(px(double(i)), py(h[i]));
+      cv::line(img, cv::Point(int(std::lround(a.x * 16)), int(std::lround(a.y * 16))),
+               cv::Point(int(std::lround(b.x * 16)), int(std::lround(b.y * 16))), c, thick, cv::LINE_AA, 4);
+    }
+  };
+  for (size_t k = 0; k < r.run_histories.size(); ++k)
+    if (int(k) != r.winner) curve(r.run_histories[k], light, 1);
+  curve(r.history, strong, 2);
+  // Axes and labels.
+  cv::rectangle(img, cv::Point(L, T), cv::Point(R, B), black, 1);
+  cv::putText(img, "iteration", cv::Point((L + R) / 2 - 35, H - 15), font, 0.5, black, 1, cv::LINE_AA);
+  cv::putText(img, log_scale ? "loss (log)" : "loss", cv::Point(8, T - 8), font, 0.45, black, 1, cv::LINE_AA);
+  const std::string summary = "initial " + tick_label(r.initial_loss) + " -> final " + tick_label(r.loss.total);
+  int base = 0;
+  const cv::Size ts = cv::getTextSize(summary, font, 0.5, 1, &base);
+  cv::putText(img, summary, cv::Point(R - ts.width - 8, T + ts.height + 8), font, 0.5, strong, 1, cv::LINE_AA);
+  return img;
+}
+
+nlohmann::ordered_json pose_json(const RefineResult& r) {
+  const Pose& p = r.pose;
+  std::vector<double> m16;
+  const Eigen::Matrix4d M = p.matrix();
+  for (int i = 0; i < 16; ++i) m16.push_back(M(i / 4, i % 4));
+  const double lr = r.winner >= 0 && r.winner < int(r.learning_rates.size()) ? r.learning_rates[r.winner] : 0.0;
+  return nlohmann::ordered_json{{"R", p.rotation_rowmajor()},
+              {"t", {p.t.x(), p.t.y(), p.t.z()}},
+              {"quaternion_xyzw", p.quaternion_xyzw()},
+              {"matrix", m16},
+              {"loss", r.loss.total},
+              {"loss_terms", {{"rgb", r.loss.rgb}, {"depth", r.loss.depth}, {"mask", r.loss.mask}}},
+              {"initial_loss", r.initial_loss},
+              {"iterations", r.iterations},
+              {"time_ms", r.time_ms},
+              {"mask_iou", r.mask_iou},
+              {"depth_inliers", r.depth_inliers},
+              {"converged", r.converged},
+              {"plausible", r.plausible},
+              {"winner", r.winner},
+              {"learning_rate", lr}};
+}
+
+struct Args {
+  std::string rgb, depth, mask, camera, mesh, init, out, config;
+  double depth_scale = 0.001, mesh_scale = 1.0;
+  bool quiet = false;
+};
+
+int usage_error(const std::string& what) {
+  if (!what.empty()) std::cerr << "diffdope_refine: " << what << "\n";
+  std::cerr << kUsage;
+  return 2;
+}
+
+/// Parses argv into `a`; returns -1 to go on, else the exit code.
+int parse_args(int argc, char** argv, Args& a) {
+  for (int i = 1; i < argc; ++i) {
+    const std::string k = argv[i];
+    if (k == "-h" || k == "--help") {
+      std::cout << kUsage;
+      return 0;
+    }
+    if (k == "--quiet" || k == "-q") {
+      a.quiet = true;
+      continue;
+    }
+    std::string* target = nullptr;
+    double* num = nullptr;
+    if (k == "--rgb") target = &a.rgb;
+    else if (k == "--depth") target = &a.depth;
+    else if (k == "--mask") target = &a.mask;
+    else if (k == "--camera") target = &a.camera;
+    else if (k == "--mesh") target = &a.mesh;
+    else if (k == "--init") target = &a.init;
+    else if (k == "--out") target = &a.out;
+    else if (k == "--config") target = &a.config;
+    else if (k == "--depth-scale") num = &a.depth_scale;
+    else if (k == "--mesh-scale") num = &a.mesh_scale;
+    else return usage_error("unknown option " + k);
+    if (i + 1 >= argc) return usage_error(k + " needs a value");
+    const std::string v = argv[++i];
+    if (target) {
+      if (v.empty()) return usage_error(k + " needs a non-empty value");
+      *target = v;
+    } else {
+      size_t used = 0;
+      double d = std::numeric_limits<double>::quiet_NaN();
+      try {
+        d = std::stod(v, &used);
+      } catch (const std::exception&) {
+        used = 0;
+      }
+      if (used != v.size() || !std::isfinite(d) || d <= 0)
+        return usage_error(k + " needs a positive number, got '" + v + "'");
+      *num = d;
+    }
+  }
+  std::string missing;
+  for (const auto& [flag, val] : {std::pair<const char*, const std::string*>{"--rgb", &a.rgb},
+                                  {"--camera", &a.camera}, {"--mesh", &a.mesh}, {"--init", &a.init},
+                                  {"--out", &a.out}})
+    if (val->empty()) missing += std::string(missing.empty() ? "" : ", ") + flag;
+  if (!missing.empty()) return usage_error("missing " + missing);
+  return -1;
+}
+
+int run(const Args& a) {
+  // Options first: a typo in the config should not wait for the mesh to load.
+  RefinerOptions options;
+  if (!a.config.empty()) {
+    check_file(a.config);
+    options = about(a.config, [&] { return RefinerOptions::from_yaml_file(a.config); });
+    about(a.config, [&] { options.validate(); });
+  }
+
+  Observation obs;
+  const cv::Mat rgb = read_image(a.rgb, cv::IMREAD_ANYDEPTH | cv::IMREAD_ANYCOLOR, "rgb");
+  obs.rgb = about(a.rgb, [&] { return to_rgb_float(rgb, /*bgr=*/true, a.rgb); });
+  const int W = obs.rgb.cols, H = obs.rgb.rows;
+  const Camera cam = read_camera(a.camera, W, H);
+
+  if (!a.depth.empty()) {
+    const cv::Mat d = read_image(a.depth, cv::IMREAD_ANYDEPTH | cv::IMREAD_ANYCOLOR, "depth");
+    if (d.channels() != 1)
+      fail(a.depth, "depth must have one channel, found " + std::to_string(d.channels()));
+    if (d.cols != W || d.rows != H)
+      fail(a.depth, "depth image is " + size_str(d.cols, d.rows) + " but the rgb image is " + size_str(W, H));
+    obs.depth = about(a.depth, [&] { return to_depth_metres(d, a.depth_scale, a.depth); });
+    if (cv::countNonZero(obs.depth > 0) == 0) fail(a.depth, "the depth image has no valid reading");
+  }
+  if (!a.mask.empty()) {
+    const cv::Mat m = read_image(a.mask, cv::IMREAD_ANYDEPTH | cv::IMREAD_ANYCOLOR, "mask");
+    if (m.cols != W || m.rows != H)
+      fail(a.mask, "mask is " + size_str(m.cols, m.rows) + " but the rgb image is " + size_str(W, H));
+    obs.mask = about(a.mask, [&] { return to_mask_float(m, a.mask); });
+    if (cv::countNonZero(obs.mask > 0) == 0) fail(a.mask, "the mask is empty (no nonzero pixel)");
+  }
+
+  check_file(a.mesh);
+  MeshLoadOptions mopt;
+  mopt.scale = a.mesh_scale;
+  const Mesh mesh = about(a.mesh, [&] {
+    QuietStderr quiet;
+    return Mesh::load(a.mesh, mopt);
+  });
+
+  const Pose initial = read_init(a.init);
+  check_init_in_view(a.init, initial, mesh, a.mesh, cam, options.render.near_plane);
+
+  std::error_code ec;
+  fs::create_directories(a.out, ec);
+  if (ec || !fs::is_directory(a.out)) fail(a.out, "cannot create the output folder" + (ec ? " (" + ec.message() + ")" : ""));
+
+  Refiner refiner = about(a.config.empty() ? "options" : a.config, [&] { return Refiner(options); });
+  const bool progress = !a.quiet && isatty(2);
+  if (progress) {
+    refiner.on_iteration = [](int k, int total, double best) {
+      const int width = 30, filled = total > 0 ? width * k / total : width;
+      std::fprintf(stderr, "\r[%s%s] %4d/%d  best loss %.5f ", std::string(filled, '#').c_str(),
+                   std::string(width - filled, ' ').c_str(), k, total, best);
+      std::fflush(stderr);
+    };
+  }
+  RefineResult r;
+  try {
+    r = refiner.refine(cam, obs, mesh, initial);
+  } catch (const std::exception& e) {
+    if (progress) std::fprintf(stderr, "\n");
+    const std::string m = e.what();
+    fail(m.find("initial pose") != std::string::npos ? a.init
+         : m.find("mask") != std::string::npos       ? (a.mask.empty() ? a.rgb : a.mask)
+                                                     : a.rgb,
+         m);
+  }
+  if (progress) std::fprintf(stderr, "\n");
+
+  const fs::path out(a.out);
+  const std::string pose_path = (out / "pose.json").string();
+  {
+    std::ofstream f(pose_path);
+    if (!f) fail(pose_path, "cannot write");
+    f << pose_json(r).dump(2) << "\n";
+    if (!f) fail(pose_path, "cannot write");
+  }
+  RenderOptions ropt = options.render;
+  auto renderer = make_cpu_renderer(ropt);
+  write_image((out / "overlay.png").string(), make_overlay(obs, *renderer, cam, mesh, initial, r.pose));
+  write_image((out / "losses.png").string(), make_loss_plot(r));
+
+  if (!a.quiet) {
+    const Pose& p = r.pose;
+    const auto q = p.quaternion_xyzw();
+    std::printf("refined pose (model -> camera, metres):\n");
+    for (int i = 0; i < 3; ++i)
+      std::printf("  %s [%10.6f %10.6f %10.6f]\n", i == 0 ? "R =" : "   ", p.R(i, 0), p.R(i, 1), p.R(i, 2));
+    std::printf("  t = [%10.6f %10.6f %10.6f] m\n", p.t.x(), p.t.y(), p.t.z());
+    std::printf("  quaternion (x y z w) = [%.6f %.6f %.6f %.6f]\n", q[0], q[1], q[2], q[3]);
+    std::printf("moved %.2f mm, %.2f deg from the initial pose\n", 1e3 * (p.t - initial.t).norm(),
+                rotation_angle(p.R, initial.R) * 180 / M_PI);
+    std::printf("loss %.5f -> %.5f (rgb %.4f, depth %.4f, mask %.4f)\n", r.initial_loss, r.loss.total, r.loss.rgb,
+                r.loss.depth, r.loss.mask);
+    std::printf("mask IoU %s, depth inliers %s, converged %s, plausible %s\n",
+                r.mask_iou < 0 ? "n/a" : fmt(r.mask_iou, "%.3f").c_str(),
+                r.depth_inliers < 0 ? "n/a" : fmt(r.depth_inliers, "%.3f").c_str(), r.converged ? "yes" : "no",
+                r.plausible ? "yes" : "NO");
+    std::printf("time %.0f ms (B=%d, %d iterations, image scale %.2f, winner #%d, lr %.5f)\n", r.time_ms,
+                options.batch_size, r.iterations, options.image_scale, r.winner,
+                r.winner >= 0 ? r.learning_rates[r.winner] : 0.0);
+    std::printf("wrote %s, overlay.png, losses.png\n", pose_path.c_str());
+  }
+  return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  Args args;
+  const int rc = parse_args(argc, argv, args);
+  if (rc >= 0) return rc;
+  // OpenCV's own warnings (e.g. from image decoders) would add lines to our one-line error reports.
+  cv::utils::logging::setLogLevel(cv::utils::logging::LOG_LEVEL_SILENT);
+  try {
+    return run(args);
+  } catch (const InputError& e) {
+    std::cerr << "diffdope_refine: " << e.file << ": " << one_line(e.what()) << "\n";
+  } catch (const std::exception& e) {
+    std::cerr << "diffdope_refine: " << one_line(e.what()) << "\n";
+  } catch (...) {
+    std::cerr << "diffdope_refine: unknown error\n";
+  }
+  return 1;
+}
