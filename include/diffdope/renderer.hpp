@@ -31,7 +31,8 @@ struct RenderOptions {
 /// not depend on the image resolution:
 ///   rgb   = mean over S of  cov*|I_c - R_c|_1/3 + (1 - cov)*rgb_miss            (colours in [0, 1])
 ///   depth = mean over S with a depth reading of  cov*min(|I_d - R_d|, tau)/tau + (1 - cov)   (tau = depth_truncation)
-///   mask  = sum over pixels of |S - cov| / sum(S)   (mismatched area as a fraction of the object's area)
+///   mask  = sum over pixels of |S - cov| / sum(S)   (mismatched area as a fraction of the object's area; pixels
+///           where the observed depth shows an occluder in front of the render are skipped)
 ///   edges = mean over S of |E_obs - E_render|, E_render = m / (m + edge_scale), m = |Sobel(grey of the render)|
 ///           (only when the observation carries an edge map, see Observation::edges)
 /// where S is the observed mask (all ones when absent) and cov the antialiased coverage of the render.
@@ -43,6 +44,9 @@ struct LossOptions {
   double edge_scale = 0.4;        // Sobel magnitude at which E_render = 0.5 (about a grey step of 0.1)
   double rgb_miss = 0.5;          // cost of an observed object pixel the render misses (colour term)
   double depth_truncation = 0.05; // metres; larger depth errors (noise, occluders) count as tau
+  /// Metres: where the observed depth is this much nearer than the render, an occluder hides the object, so
+  /// an empty observed mask there is not evidence against the render (mask term skips the pixel). 0 = off.
+  double occlusion_margin = 0.02;
 };
 
 /// One hypothesis' loss: per-term means (unweighted), the weighted total, and d(total)/d(delta).

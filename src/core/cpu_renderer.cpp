@@ -37,7 +37,7 @@ struct Workspace {
   std::vector<Vec3f> cam;
   std::vector<Vec2f> pix;
   std::vector<float> tri_area;
-  std::vector<signed char> tri_level;
+  std::vector<float> tri_level;
   std::vector<float> zbuf;
   std::vector<int> tri;
   std::vector<PixelAttr> pre, post, g_pre, g_post;
@@ -123,7 +123,7 @@ Rect CpuRenderer::rasterize(const CallContext& ctx, const Pose& pose, Workspace&
   for (int i = 0; i < nv; ++i) vertex_setup(M, T, K, ctx.near_z, i, ws.cam.data(), ws.pix.data());
   for (int t = 0; t < nt; ++t) {
     ws.tri_area[t] = triangle_setup(M, ws.cam.data(), ws.pix.data(), ctx.near_z, ctx.cull, t);
-    ws.tri_level[t] = static_cast<signed char>(triangle_mip_level(M, t, ws.tri_area[t]));
+    ws.tri_level[t] = triangle_mip_level(M, t, ws.tri_area[t]);
   }
   const ProjectedView G = projected_view(ws);
 
@@ -306,6 +306,7 @@ void CpuRenderer::evaluate(const Camera& camera, const Mesh& mesh, const Observa
   P.k_mask = (obs.has_mask() && n_rgb > 0) ? static_cast<float>(loss.weight_mask / n_rgb) : 0.f;
   P.rgb_miss = static_cast<float>(loss.rgb_miss);
   P.depth_trunc = static_cast<float>(loss.depth_truncation);
+  P.occlusion_margin = static_cast<float>(loss.occlusion_margin);
   const float k_edges = (obs.has_edges() && n_rgb > 0) ? static_cast<float>(loss.weight_edges / n_rgb) : 0.f;
   const float edge_scale = static_cast<float>(loss.edge_scale);
 

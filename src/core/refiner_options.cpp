@@ -53,6 +53,7 @@ RefinerOptions parse(const YAML::Node& root, RefinerOptions o, const std::string
       read(l, "edge_scale", o.loss.edge_scale, lu);
       read(l, "rgb_miss", o.loss.rgb_miss, lu);
       read(l, "depth_truncation", o.loss.depth_truncation, lu);
+      read(l, "occlusion_margin", o.loss.occlusion_margin, lu);
       reject_unknown(l, lu, origin + " (loss)");
     }
     used.insert("render");

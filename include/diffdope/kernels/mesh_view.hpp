@@ -25,13 +25,13 @@ struct ProjectedView {
   const Vec3f* cam;
   const Vec2f* pix;
   const float* tri_area;
-  const signed char* tri_level;
+  const float* tri_level;  // fractional mip level of the triangle's texture
 };
 
 /// Mip level of triangle `tri` for its current pixel area.
-DD_HOST_DEVICE int triangle_mip_level(const MeshView& M, int tri, float pixel_area) {
+DD_HOST_DEVICE float triangle_mip_level(const MeshView& M, int tri, float pixel_area) {
   const int tex = M.tri_texture[tri];
-  if (tex < 0) return 0;
+  if (tex < 0) return 0.f;
   const TextureLevelView& l0 = M.textures[tex].level[0];
   return mip_level(M.tri_uv_area[tri] * float(l0.width) * float(l0.height), fabsf(pixel_area), M.textures[tex].levels);
 }

@@ -5,7 +5,9 @@
 //
 //  rgb   = S * ( sum_ch |cov*I_ch - C_ch| / 3 + (1 - cov) * rgb_miss )
 //  depth = S * valid * ( min(|cov*I_d - D|, cov*tau) + (1 - cov) * tau ) / tau      (in [0, 1] per pixel)
-//  mask  = |S - cov|
+//  mask  = |S - cov|, except where S = 0 because something is in front of the object: an observed depth more
+//          than occlusion_margin nearer than the render means an occluder, and the visible mask is rightly
+//          empty there (without this, occluders push the object away).
 // An observed object pixel (S > 0) that the render does not cover costs the "miss" value, so holes and
 // uncovered pixels never compare against a meaningless background colour or depth.
 #include "diffdope/kernels/vec.hpp"
@@ -17,6 +19,7 @@ struct PixelLossParams {
   float k_rgb, k_depth, k_mask;  // weight_term / number of pixels the term averages over
   float rgb_miss;                // cost of an observed pixel the render misses, colour term
   float depth_trunc;             // tau, metres: depth errors saturate here
+  float occlusion_margin;        // metres; <= 0 disables occlusion handling in the mask term
 };
 
 struct PixelLossValue {
@@ -61,7 +64,9 @@ DD_HOST_DEVICE PixelLossValue pixel_loss(const PixelLossParams& P, float S, cons
       v.depth = S;  // saturated: cov*tau + (1-cov)*tau = tau
     }
   }
-  if (P.k_mask != 0.f) {
+  const bool occluded = P.occlusion_margin > 0.f && S < 0.5f && depth_valid && cov > 0.f &&
+                        Id * cov < D - P.occlusion_margin * cov;  // Id < D / cov - margin
+  if (P.k_mask != 0.f && !occluded) {
     const float a = S - cov;
     v.mask = fabsf(a);
     if (g) g->cov -= P.k_mask * signf(a);

@@ -37,7 +37,7 @@ DD_HOST_DEVICE void shade_pixel(const MeshView& M, const ProjectedView& G, const
   const int tex = M.tri_texture[tri];
   if (tex >= 0 && M.uvs) {
     const Vec2f uv = b[0] * M.uvs[v[0]] + b[1] * M.uvs[v[1]] + b[2] * M.uvs[v[2]];
-    *colour = sample_bilinear(M.textures[tex].level[G.tri_level[tri]], uv, nullptr, nullptr);
+    *colour = sample_trilinear(M.textures[tex], G.tri_level[tri], uv, nullptr, nullptr);
   } else {
     *colour = b[0] * M.colors[v[0]] + b[1] * M.colors[v[1]] + b[2] * M.colors[v[2]];
   }
@@ -61,7 +61,7 @@ DD_HOST_DEVICE void shade_pixel_backward(const MeshView& M, const ProjectedView&
   if (tex >= 0 && M.uvs) {
     const Vec2f uv = b[0] * M.uvs[v[0]] + b[1] * M.uvs[v[1]] + b[2] * M.uvs[v[2]];
     Vec3f dcdu, dcdv;
-    sample_bilinear(M.textures[tex].level[G.tri_level[tri]], uv, &dcdu, &dcdv);
+    sample_trilinear(M.textures[tex], G.tri_level[tri], uv, &dcdu, &dcdv);
     const float gu = dot(g_colour, dcdu), gv = dot(g_colour, dcdv);
     for (int i = 0; i < 3; ++i) g_b[i] = gu * M.uvs[v[i]].x + gv * M.uvs[v[i]].y + g_depth * X[i].z;
   } else {

@@ -19,16 +19,14 @@ struct TextureView {
   int levels;
 };
 
-/// Mip level for a triangle covering `pixel_area` pixels and `texel_area` level-0 texels: the level whose texels
-/// are about one pixel wide (round(log2(sqrt(texel_area / pixel_area)))). Sampling a finer level would alias
-/// (texel noise instead of the filtered colour a camera sees) and miss the cache on large textures.
-DD_HOST_DEVICE int mip_level(float texel_area, float pixel_area, int levels) {
-  if (!(pixel_area > 0.f)) return 0;
-  // round(0.5 * log2(r)) >= l  <=>  r >= 2 * 4^(l-1): count thresholds instead of calling log2 per triangle.
-  const float r = texel_area / pixel_area;
-  int l = 0;
-  for (float threshold = 2.f; l + 1 < levels && r >= threshold; threshold *= 4.f) ++l;
-  return l;
+/// Fractional mip level for a triangle covering `pixel_area` pixels and `texel_area` level-0 texels: the level
+/// whose texels are about one pixel wide, log2(sqrt(texel_area / pixel_area)), in [0, levels - 1]. Sampling a
+/// finer level would alias (texel noise instead of the filtered colour a camera sees) and miss the cache on
+/// large textures. Levels are blended (trilinear), so colours do not jump when the level changes with the pose.
+DD_HOST_DEVICE float mip_level(float texel_area, float pixel_area, int levels) {
+  if (!(pixel_area > 0.f) || !(texel_area > pixel_area)) return 0.f;
+  const float l = 0.5f * log2f(texel_area / pixel_area);
+  return l > float(levels - 1) ? float(levels - 1) : l;
 }
 
 /// Samples tex at uv. If d_du / d_dv are non-null they receive d(colour)/du and d(colour)/dv.
@@ -60,6 +58,24 @@ DD_HOST_DEVICE Vec3f sample_bilinear(const TextureLevelView& tex, Vec2f uv, Vec3
   if (d_du) *d_du = {sx * gx[0] * tex.width, sx * gx[1] * tex.width, sx * gx[2] * tex.width};
   if (d_dv) *d_dv = {-sy * gy[0] * tex.height, -sy * gy[1] * tex.height, -sy * gy[2] * tex.height};
   return {c[0], c[1], c[2]};
+}
+
+/// Trilinear lookup: bilinear in the two levels around `level`, blended. The blend weight's own dependence on
+/// the pose is not differentiated (it follows the triangle's size, a slow effect).
+DD_HOST_DEVICE Vec3f sample_trilinear(const TextureView& tex, float level, Vec2f uv, Vec3f* d_du, Vec3f* d_dv) {
+  const int l0 = static_cast<int>(level);
+  const int l1 = l0 + 1 < tex.levels ? l0 + 1 : l0;
+  const float f = level - float(l0);
+  if (f <= 0.f || l1 == l0) return sample_bilinear(tex.level[l0], uv, d_du, d_dv);
+  Vec3f du0, dv0, du1, dv1;
+  const bool grad = d_du != nullptr;
+  const Vec3f c0 = sample_bilinear(tex.level[l0], uv, grad ? &du0 : nullptr, grad ? &dv0 : nullptr);
+  const Vec3f c1 = sample_bilinear(tex.level[l1], uv, grad ? &du1 : nullptr, grad ? &dv1 : nullptr);
+  if (grad) {
+    *d_du = (1.f - f) * du0 + f * du1;
+    *d_dv = (1.f - f) * dv0 + f * dv1;
+  }
+  return (1.f - f) * c0 + f * c1;
 }
 
 }  // namespace diffdope
