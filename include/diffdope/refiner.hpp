@@ -85,6 +85,14 @@ struct RefineResult {
                                       // reading within inlier_threshold of the render; -1 without depth
   bool converged = false;             // the winner's loss stopped improving (relative change < 1 % over the last 10 %)
   bool plausible = false;             // scores pass the thresholds in RefinerOptions
+  std::string error;                  // refine_all(): why this object could not be refined (empty = refined)
+};
+
+/// One object of a frame for Refiner::refine_all().
+struct ObjectTarget {
+  const Mesh* mesh = nullptr;
+  Pose initial;
+  cv::Mat mask;  // this object's visible mask (CV_32FC1, or any type to_mask_float takes); may be empty
 };
 
 class Refiner {
@@ -96,6 +104,12 @@ class Refiner {
   /// empty; at least one of rgb or depth is needed), `camera` their intrinsics. Throws std::invalid_argument
   /// on unusable input (NaN pose, object behind the camera, images that do not match the camera).
   RefineResult refine(const Camera& camera, const Observation& observed, const Mesh& mesh, const Pose& initial);
+
+  /// Refines every object of one frame (the frame's rgb and depth, each object's own mask). An object whose
+  /// input is unusable gets its reason in RefineResult::error (pose = initial, plausible = false); the others
+  /// are still refined. Objects run one after the other, each using all threads over its B runs.
+  std::vector<RefineResult> refine_all(const Camera& camera, const Observation& frame,
+                                       const std::vector<ObjectTarget>& objects);
 
   /// Optional progress callback, called once per iteration of refine() (iteration 0..total, total = the
   /// configured iterations) with the best loss of any run so far.

@@ -174,4 +174,26 @@ RefineResult Refiner::refine(const Camera& camera, const Observation& observed, 
   return res;
 }
 
+std::vector<RefineResult> Refiner::refine_all(const Camera& camera, const Observation& frame,
+                                              const std::vector<ObjectTarget>& objects) {
+  std::vector<RefineResult> out;
+  for (const ObjectTarget& t : objects) {
+    Observation o;
+    o.rgb = frame.rgb;
+    o.depth = frame.depth;
+    o.edges = frame.edges;
+    try {
+      if (!t.mesh) throw std::invalid_argument("no mesh");
+      if (!t.mask.empty()) o.mask = t.mask.type() == CV_32FC1 ? t.mask : to_mask_float(t.mask);
+      out.push_back(refine(camera, o, *t.mesh, t.initial));
+    } catch (const std::exception& e) {
+      RefineResult r;
+      r.pose = r.initial_pose = t.initial;
+      r.error = e.what();
+      out.push_back(r);
+    }
+  }
+  return out;
+}
+
 }  // namespace diffdope

@@ -178,7 +178,8 @@ int main(int argc, char** argv) {
                                  {"init_t", {1e3 * p.pose.t.x(), 1e3 * p.pose.t.y(), 1e3 * p.pose.t.z()}},
                                  {"time_ms", r.time_ms}, {"loss", r.loss.total}, {"error_init_mm", 1e3 * e0},
                                  {"error_mm", 1e3 * e1}, {"metric", sym ? "ADD-S" : "ADD"},
-                                 {"mask_iou", r.mask_iou}, {"plausible", r.plausible}};
+                                 {"mask_iou", r.mask_iou}, {"plausible", r.plausible},
+                                 {"winner_lr", r.learning_rates[r.winner]}};
           out << line.dump() << "\n";
           out.flush();
           std::fprintf(stderr, "\r%s scene %d sample %d: %.1f -> %.1f mm (%.0f ms)    ", level.c_str(), scene,

@@ -143,6 +143,37 @@ TEST(Refiner, RejectsBadInput) {
   EXPECT_THROW(refiner.refine(s.cam, nothing, s.mesh, s.truth), std::invalid_argument);
 }
 
+TEST(Refiner, RefinesEveryObjectOfAFrameAndReportsBadOnes) {
+  const Camera cam(420, 420, 159.5, 119.5, 320, 240);
+  const Mesh box = make_box(Eigen::Vector3d(0.08, 0.05, 0.1), make_label_texture(256, 41));
+  const Mesh can = make_cylinder(0.03, 0.09, 32, make_label_texture(256, 42));
+  Vector6d d;
+  d << 0, 0, 0, 0.4, 0.3, 0.2;
+  const Pose box_truth(se3_exp(d).R, Eigen::Vector3d(-0.07, 0.0, 0.6));
+  const Pose can_truth(se3_exp(-d).R, Eigen::Vector3d(0.07, 0.01, 0.55));
+  auto r = make_cpu_renderer();
+  const SyntheticScene scene =
+      synthesize_scene(*r, cam, {SceneObject{&box, box_truth}, SceneObject{&can, can_truth}}, SyntheticNoise(), 9);
+  Observation frame;
+  frame.rgb = scene.rgb;
+  frame.depth = scene.depth;
+  std::mt19937_64 rng(9);
+  Pose nan_pose = box_truth;
+  nan_pose.t.x() = std::nan("");
+  const std::vector<ObjectTarget> objects = {
+      {&box, perturb_pose(box_truth, box.center(), 10 * M_PI / 180, 0.01, rng), scene.visible_masks[0]},
+      {&can, perturb_pose(can_truth, can.center(), 10 * M_PI / 180, 0.01, rng), scene.visible_masks[1]},
+      {&box, nan_pose, scene.visible_masks[0]}};
+  const auto res = Refiner(test_options()).refine_all(cam, frame, objects);
+  ASSERT_EQ(res.size(), 3u);
+  EXPECT_TRUE(res[0].error.empty());
+  EXPECT_TRUE(res[1].error.empty());
+  EXPECT_LT(1e3 * add_error(metric_points(box), res[0].pose, box_truth), 3.0);
+  EXPECT_LT(1e3 * adds_error(metric_points(can), res[1].pose, can_truth), 3.0);
+  EXPECT_FALSE(res[2].error.empty());
+  EXPECT_FALSE(res[2].plausible);
+}
+
 TEST(RefinerOptions, YamlOverridesAndRejectsTypos) {
   const RefinerOptions o = RefinerOptions::from_yaml_string(
       "batch_size: 8\niterations: 50\nlr_log_uniform: true\nloss: {weight_rgb: 0, depth_truncation: 0.02}\n"
