@@ -335,6 +335,10 @@ void CpuRenderer::evaluate(const Camera& camera, const Mesh& mesh, const Observa
         const float Id = drow ? drow[x] : 0.f;
         const bool valid = Id > 0.f;  // to_depth_metres maps NaN / negative to 0
         const PixelAttr& a = ws.post[i];
+        if (S == 0.f && a.cov == 0.f) {  // background the render does not touch: no loss, no gradient
+          if (with_gradient) ws.g_post[i] = PixelAttr{0.f, {0.f, 0.f, 0.f}, 0.f};
+          continue;
+        }
         PixelLossGrad g;
         const PixelLossValue v = pixel_loss(P, S, I, Id, valid, a.cov, a.c, a.d, with_gradient ? &g : nullptr);
         sum_rgb += v.rgb;
