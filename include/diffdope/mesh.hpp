@@ -67,6 +67,10 @@ class Mesh {
   /// Per triangle edge k: 1 where texture, UVs or colours are discontinuous across it (a colour seam).
   const std::vector<unsigned char>& seams() const { return seams_; }
 
+  /// True when the surface is closed and consistently wound with outward normals (back faces then never show
+  /// from outside, so the renderer may cull them).
+  bool closed_and_outward() const { return closed_outward_; }
+
   /// Kernel view over host memory; valid while this mesh and `texture_storage` live and are not modified.
   MeshView view(std::vector<TextureView>& texture_storage) const;
 
@@ -78,6 +82,7 @@ class Mesh {
   std::vector<int> neighbors_, opposite_;
   std::vector<unsigned char> seams_;
   std::vector<float> tri_uv_area_;
+  bool closed_outward_ = false;
 };
 
 /// Writes an ASCII PLY (BOP layout: positions times `units_per_metre`, e.g. 1000 for millimetres; texture_u/v and

@@ -16,6 +16,9 @@ namespace diffdope {
 struct RenderOptions {
   /// Skip triangles facing away from the camera. Faster for closed meshes; keep off for open ones.
   bool cull_back_faces = false;
+  /// Cull back faces anyway when the mesh is closed and wound outward (Mesh::closed_and_outward): exact for a
+  /// camera outside the object, and roughly halves the rasterisation work.
+  bool auto_cull_closed = true;
   /// Triangles with a vertex closer than this (metres) are not drawn.
   double near_plane = 0.01;
   /// Pixels added around the region of interest (projected model box union observed mask). >= 1 so that

@@ -95,7 +95,7 @@ CallContext CpuRenderer::make_context(const Camera& camera, const Mesh& mesh, co
   ctx.mesh = mesh.view(texture_views_);
   ctx.K = camera.intrinsics();
   ctx.near_z = static_cast<float>(options_.near_plane);
-  ctx.cull = options_.cull_back_faces;
+  ctx.cull = options_.cull_back_faces || (options_.auto_cull_closed && mesh.closed_and_outward());
   ctx.use_roi = options_.use_roi;
   ctx.margin = std::max(1, options_.roi_margin);
   ctx.bbox_corners = mesh.bbox_corners();
@@ -155,47 +155,52 @@ Rect CpuRenderer::rasterize(const CallContext& ctx, const Pose& pose, Workspace&
   ws.zbuf.assign(N, std::numeric_limits<float>::infinity());
   ws.tri.assign(N, -1);
 
-  // Z-buffer raster. Depth is interpolated as 1/z (linear in the image); ties keep the lower triangle index.
+  // Z-buffer raster with exact (fixed-point) coverage. Depth is interpolated as 1/z (linear in the image);
+  // ties keep the lower triangle index.
+  constexpr long long kOne = 1LL << kSubpixelBits;
   for (int t = 0; t < nt; ++t) {
-    const float area = ws.tri_area[t];
-    if (area == 0.f) continue;
+    if (ws.tri_area[t] == 0.f) continue;
     const int* v = M.triangles + 3 * t;
     const Vec2f s[3] = {ws.pix[v[0]], ws.pix[v[1]], ws.pix[v[2]]};
-    const float orient = area > 0.f ? 1.f : -1.f;
+    const FixedPoint2 f[3] = {to_fixed(s[0]), to_fixed(s[1]), to_fixed(s[2])};
+    const long long area2 = edge_function_fixed(f[0], f[1], f[2].x, f[2].y);
+    if (area2 == 0) continue;
+    const long long orient = area2 > 0 ? 1 : -1;
     const int xs = std::max(roi.x0, static_cast<int>(std::ceil(std::min({s[0].x, s[1].x, s[2].x}))));
     const int xe = std::min(roi.x1 - 1, static_cast<int>(std::floor(std::max({s[0].x, s[1].x, s[2].x}))));
     const int ys = std::max(roi.y0, static_cast<int>(std::ceil(std::min({s[0].y, s[1].y, s[2].y}))));
     const int ye = std::min(roi.y1 - 1, static_cast<int>(std::floor(std::max({s[0].y, s[1].y, s[2].y}))));
     if (xs > xe || ys > ye) continue;
-    const float inv2a = 1.f / (2.f * std::fabs(area));
+    const float inv2a = 1.f / static_cast<float>(orient * area2);
     // Edge k (s_k -> s_k+1) weighs the opposite vertex k+2.
     const float iz[3] = {1.f / ws.cam[v[2]].z, 1.f / ws.cam[v[0]].z, 1.f / ws.cam[v[1]].z};
     bool top_left[3];
-    float dx[3];
+    long long dx[3];
     for (int k = 0; k < 3; ++k) {
-      top_left[k] = edge_is_top_left(s[k], s[(k + 1) % 3], orient);
-      dx[k] = -orient * (s[(k + 1) % 3].y - s[k].y);  // d(edge)/dx
+      top_left[k] = edge_is_top_left_fixed(f[k], f[(k + 1) % 3], orient);
+      dx[k] = -orient * (f[(k + 1) % 3].y - f[k].y) * kOne;  // edge change per pixel step in x
     }
     for (int y = ys; y <= ye; ++y) {
-      // Wide triangles: trim the row to the triangle's span (one pixel of slack for rounding; the exact test
-      // stays below). Small ones are cheaper to test pixel by pixel.
+      long long e[3];
+      for (int k = 0; k < 3; ++k) e[k] = orient * edge_function_fixed(f[k], f[(k + 1) % 3], xs * kOne, y * kOne);
+      // Wide triangles: start and stop the row at the triangle's span (exact integer division).
       int lo = xs, hi = xe;
-      for (int k = 0; k < 3 && xe - xs > 8; ++k) {
-        const float e0 = orient * edge_function(s[k], s[(k + 1) % 3], Vec2f{static_cast<float>(xs), static_cast<float>(y)});
-        if (dx[k] > 0.f) lo = std::max(lo, xs + static_cast<int>(std::ceil(-e0 / dx[k])) - 1);
-        else if (dx[k] < 0.f) hi = std::min(hi, xs + static_cast<int>(std::floor(-e0 / dx[k])) + 1);
+      if (xe - xs > 8) {
+        for (int k = 0; k < 3; ++k) {
+          if (dx[k] > 0 && e[k] < 0) lo = std::max(lo, xs + static_cast<int>((-e[k] + dx[k] - 1) / dx[k]));
+          else if (dx[k] < 0 && e[k] >= 0) hi = std::min(hi, xs + static_cast<int>(e[k] / -dx[k]));
+          else if (dx[k] < 0 && e[k] < 0) hi = xs - 1;
+        }
+        if (lo > hi) continue;
+        for (int k = 0; k < 3; ++k) e[k] += dx[k] * (lo - xs);
       }
-      if (lo > hi) continue;
-      float e[3];
-      for (int k = 0; k < 3; ++k)
-        e[k] = orient * edge_function(s[k], s[(k + 1) % 3], Vec2f{static_cast<float>(lo), static_cast<float>(y)});
       float* zrow = ws.zbuf.data() + (y - roi.y0) * W - roi.x0;
       int* trow = ws.tri.data() + (y - roi.y0) * W - roi.x0;
       for (int x = lo; x <= hi; ++x, e[0] += dx[0], e[1] += dx[1], e[2] += dx[2]) {
         bool inside = true;
-        for (int k = 0; k < 3; ++k) inside &= e[k] > 0.f || (e[k] == 0.f && top_left[k]);
+        for (int k = 0; k < 3; ++k) inside &= e[k] > 0 || (e[k] == 0 && top_left[k]);
         if (!inside) continue;
-        const float z = 1.f / ((e[0] * iz[0] + e[1] * iz[1] + e[2] * iz[2]) * inv2a);
+        const float z = 1.f / ((float(e[0]) * iz[0] + float(e[1]) * iz[1] + float(e[2]) * iz[2]) * inv2a);
         if (z < zrow[x]) {
           zrow[x] = z;
           trow[x] = t;

@@ -1,5 +1,6 @@
 #include "diffdope/mesh.hpp"
 
+#include <Eigen/Geometry>
 #include <algorithm>
 #include <cmath>
 #include <stdexcept>
@@ -161,6 +162,30 @@ void Mesh::build_adjacency() {
     }
     seams_[a] = seams_[b] = seam ? 1 : 0;
   }
+  // Closed and consistently wound outward: every drawn triangle has three neighbours that traverse each shared
+  // edge the other way round, and the enclosed volume is positive. Then back faces are never visible from
+  // outside and culling them changes nothing.
+  bool closed = true;
+  double volume = 0;
+  for (int t = 0; t < nt && closed; ++t) {
+    const int* v = &triangles[3 * t];
+    if (weld[v[0]] == weld[v[1]] || weld[v[1]] == weld[v[2]] || weld[v[0]] == weld[v[2]]) continue;
+    for (int k = 0; k < 3 && closed; ++k) {
+      const int n = neighbors_[3 * t + k];
+      if (n < 0) {
+        closed = false;
+        break;
+      }
+      const int start = weld[v[k]], end = weld[v[(k + 1) % 3]];
+      bool reversed = false;
+      for (int c = 0; c < 3; ++c)
+        reversed |= weld[triangles[3 * n + c]] == end && weld[triangles[3 * n + (c + 1) % 3]] == start;
+      closed = reversed;
+    }
+    const Eigen::Vector3d p0 = to_eigen(positions[v[0]]), p1 = to_eigen(positions[v[1]]), p2 = to_eigen(positions[v[2]]);
+    volume += p0.dot(p1.cross(p2)) / 6.0;
+  }
+  closed_outward_ = closed && volume > 0;
 }
 
 std::vector<Eigen::Vector3d> Mesh::bbox_corners() const {

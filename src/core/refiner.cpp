@@ -104,7 +104,7 @@ RefineResult Refiner::refine(const Camera& camera, const Observation& observed, 
   int k = 0;
   for (; k <= iters; ++k) {
     const bool last = k == iters;
-    if (o.successive_halving && !last && active.size() > 1 && (k == iters / 4 || k == iters / 2)) {
+    if (o.successive_halving && k > 0 && !last && active.size() > 1 && (k == iters / 4 || k == iters / 2)) {
       std::stable_sort(active.begin(), active.end(), [&](int a, int b) { return best[a].total < best[b].total; });
       active.resize((active.size() + 1) / 2);
       std::sort(active.begin(), active.end());

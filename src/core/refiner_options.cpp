@@ -60,6 +60,7 @@ RefinerOptions parse(const YAML::Node& root, RefinerOptions o, const std::string
     if (const YAML::Node r = root["render"]) {
       std::set<std::string> ru;
       read(r, "cull_back_faces", o.render.cull_back_faces, ru);
+      read(r, "auto_cull_closed", o.render.auto_cull_closed, ru);
       read(r, "near_plane", o.render.near_plane, ru);
       read(r, "roi_margin", o.render.roi_margin, ru);
       read(r, "threads", o.render.threads, ru);

@@ -47,7 +47,13 @@ TEST(Render, BoxFacingCameraCoversExpectedAreaAndDepth) {
   const RenderImage img = r->render(cam, box, {pose})[0];
   const double side = cam.fx * 0.1 / 0.45;  // front face at z = 0.45
   EXPECT_NEAR(cv::sum(img.coverage)[0], side * side, 0.01 * side * side);
-  EXPECT_NEAR(cv::countNonZero(img.triangle >= 0), side * side, 0.02 * side * side);
+  // Watertight coverage: the front face is two triangles whose shared diagonal runs through pixel centres;
+  // every pixel centre inside the face's square is covered exactly (no hole along the diagonal).
+  int inside = 0;
+  for (int y = 0; y < cam.height; ++y)
+    for (int x = 0; x < cam.width; ++x)
+      inside += std::abs(x - cam.cx) < side / 2 && std::abs(y - cam.cy) < side / 2;
+  EXPECT_EQ(cv::countNonZero(img.triangle >= 0), inside);
   EXPECT_NEAR(img.depth.at<float>(120, 160), 0.45f, 1e-5f);
   EXPECT_EQ(img.depth.at<float>(5, 5), 0.f);
   EXPECT_EQ(img.coverage.at<float>(5, 5), 0.f);
@@ -204,4 +210,43 @@ TEST(Render, UvSeamsDoNotCreateFalseSilhouettes) {
   EXPECT_EQ(blended, 0);
   // ...while the outer silhouette is antialiased.
   EXPECT_GT(cv::countNonZero((img.coverage > 0.f) & (img.coverage < 1.f)), 100);
+}
+
+TEST(Render, AutoCullingOfClosedMeshesChangesNothing) {
+  const Camera cam = test_camera();
+  const Mesh box = make_box(Eigen::Vector3d(0.1, 0.07, 0.05), make_pattern_texture(64, 9));
+  const Mesh sphere = make_uv_sphere(0.05, 12, 24, make_pattern_texture(64, 10));
+  EXPECT_TRUE(box.closed_and_outward());
+  EXPECT_TRUE(sphere.closed_and_outward());
+  EXPECT_TRUE(make_cylinder(0.03, 0.1, 16, make_pattern_texture(16, 1)).closed_and_outward());
+  Mesh open = box;  // one face removed
+  open.triangles.resize(open.triangles.size() - 6);
+  open.tri_texture.resize(open.tri_texture.size() - 2);
+  open.finalize();
+  EXPECT_FALSE(open.closed_and_outward());
+  Mesh inside_out = box;  // every triangle wound the other way: normals point inwards
+  for (size_t t = 0; t < inside_out.triangles.size(); t += 3) std::swap(inside_out.triangles[t + 1], inside_out.triangles[t + 2]);
+  inside_out.finalize();
+  EXPECT_FALSE(inside_out.closed_and_outward());
+
+  RenderOptions no_cull;
+  no_cull.auto_cull_closed = false;
+  auto culled = make_cpu_renderer(), plain = make_cpu_renderer(no_cull);
+  for (const Mesh* m : {&box, &sphere}) {
+    const Pose truth = look_pose(0.4, 0.3, 0.2, 0.0, 0.0, 0.5);
+    const Observation obs = observe(*plain, cam, *m, truth);
+    const std::vector<Pose> poses = {look_pose(0.45, 0.25, 0.25, 0.005, 0.0, 0.51), look_pose(1.5, -0.4, 0.0, 0.0, 0.01, 0.45)};
+    const auto a = culled->render(cam, *m, poses), b = plain->render(cam, *m, poses);
+    for (size_t i = 0; i < poses.size(); ++i) {
+      EXPECT_EQ(cv::norm(a[i].coverage, b[i].coverage, cv::NORM_INF), 0.0);
+      EXPECT_EQ(cv::norm(a[i].color, b[i].color, cv::NORM_INF), 0.0);
+    }
+    std::vector<LossValue> la, lb;
+    culled->evaluate(cam, *m, obs, poses, LossOptions(), true, la);
+    plain->evaluate(cam, *m, obs, poses, LossOptions(), true, lb);
+    for (size_t i = 0; i < poses.size(); ++i) {
+      EXPECT_DOUBLE_EQ(la[i].total, lb[i].total);
+      EXPECT_LT((la[i].gradient - lb[i].gradient).norm(), 1e-9 * (1 + lb[i].gradient.norm()));
+    }
+  }
 }

@@ -20,6 +20,31 @@ DD_HOST_DEVICE bool edge_is_top_left(Vec2f a, Vec2f b, float orient) {
   return (e.y == 0.f && e.x > 0.f) || e.y < 0.f;
 }
 
+/// Watertight coverage: vertex positions snapped to 1/256 pixel and edge functions evaluated exactly in 64-bit
+/// integers, so two triangles sharing an edge decide a pixel centre on it the same way (float edge functions
+/// of a->b and b->a may both round below zero and leave a hole along a diagonal).
+constexpr int kSubpixelBits = 8;
+struct FixedPoint2 {
+  long long x, y;
+};
+
+DD_HOST_DEVICE FixedPoint2 to_fixed(Vec2f p) {
+  const float lim = 1e6f;  // keeps products of coordinates far inside 64 bits
+  const float x = p.x < -lim ? -lim : (p.x > lim ? lim : p.x), y = p.y < -lim ? -lim : (p.y > lim ? lim : p.y);
+  return {static_cast<long long>(llrintf(x * float(1 << kSubpixelBits))),
+          static_cast<long long>(llrintf(y * float(1 << kSubpixelBits)))};
+}
+
+DD_HOST_DEVICE long long edge_function_fixed(FixedPoint2 a, FixedPoint2 b, long long px, long long py) {
+  return (b.x - a.x) * (py - a.y) - (b.y - a.y) * (px - a.x);
+}
+
+/// Top-left rule on fixed-point edges (see edge_is_top_left); `orient` = sign of the fixed-point area.
+DD_HOST_DEVICE bool edge_is_top_left_fixed(FixedPoint2 a, FixedPoint2 b, long long orient) {
+  const long long ex = orient * (b.x - a.x), ey = orient * (b.y - a.y);
+  return (ey == 0 && ex > 0) || ey < 0;
+}
+
 /// Perspective-correct barycentrics of the intersection of viewing ray d with the camera-space triangle
 /// (X0, X1, X2). c_i = d . (X_j x X_k) is proportional to the volume spanned by d and the opposite edge,
 /// so b_i = c_i / sum(c) are exactly the 3-D barycentrics of the hit point. Returns sum(c) (0: edge-on).
