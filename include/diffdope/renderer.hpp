@@ -68,6 +68,8 @@ struct RenderImage {
   cv::Mat triangle;   // CV_32SC1 visible triangle index, -1 where not covered
 };
 
+/// A renderer keeps scratch memory between calls: use one instance from one thread at a time (each call
+/// parallelises internally over the hypotheses).
 class Renderer {
  public:
   virtual ~Renderer() = default;
