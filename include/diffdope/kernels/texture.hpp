@@ -31,11 +31,13 @@ DD_HOST_DEVICE float mip_level(float texel_area, float pixel_area, int levels) {
 
 /// Samples tex at uv. If d_du / d_dv are non-null they receive d(colour)/du and d(colour)/dv.
 DD_HOST_DEVICE Vec3f sample_bilinear(const TextureLevelView& tex, Vec2f uv, Vec3f* d_du, Vec3f* d_dv) {
-  const float x = uv.x * tex.width - 0.5f;
-  const float y = (1.f - uv.y) * tex.height - 0.5f;
-  const float xf = floorf(x), yf = floorf(y);
-  const float fx = x - xf, fy = y - yf;
-  const int x0i = static_cast<int>(xf), y0i = static_cast<int>(yf);
+  // Clamping to one texel beyond the border changes nothing (addressing clamps) and keeps the int casts safe.
+  const float x = clampf(uv.x * tex.width - 0.5f, -1.f, float(tex.width));
+  const float y = clampf((1.f - uv.y) * tex.height - 0.5f, -1.f, float(tex.height));
+  int x0i = static_cast<int>(x), y0i = static_cast<int>(y);  // floor without a libm call (hot path)
+  x0i -= float(x0i) > x;
+  y0i -= float(y0i) > y;
+  const float fx = x - float(x0i), fy = y - float(y0i);
   const int x0 = x0i < 0 ? 0 : (x0i >= tex.width ? tex.width - 1 : x0i);
   const int x1 = x0i + 1 < 0 ? 0 : (x0i + 1 >= tex.width ? tex.width - 1 : x0i + 1);
   const int y0 = y0i < 0 ? 0 : (y0i >= tex.height ? tex.height - 1 : y0i);
