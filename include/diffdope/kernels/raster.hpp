@@ -13,13 +13,6 @@ DD_HOST_DEVICE void edge_function_grad(Vec2f a, Vec2f b, Vec2f p, Vec2f* d_a, Ve
   *d_b = {p.y - a.y, a.x - p.x};
 }
 
-/// Top-left fill rule for pixel centres exactly on an edge, so that triangles sharing an edge never both
-/// (or neither) cover a pixel. `orient` is the sign of the triangle's signed area.
-DD_HOST_DEVICE bool edge_is_top_left(Vec2f a, Vec2f b, float orient) {
-  const Vec2f e = orient * (b - a);
-  return (e.y == 0.f && e.x > 0.f) || e.y < 0.f;
-}
-
 /// Watertight coverage: vertex positions snapped to 1/256 pixel and edge functions evaluated exactly in 64-bit
 /// integers, so two triangles sharing an edge decide a pixel centre on it the same way (float edge functions
 /// of a->b and b->a may both round below zero and leave a hole along a diagonal).
@@ -39,7 +32,9 @@ DD_HOST_DEVICE long long edge_function_fixed(FixedPoint2 a, FixedPoint2 b, long 
   return (b.x - a.x) * (py - a.y) - (b.y - a.y) * (px - a.x);
 }
 
-/// Top-left rule on fixed-point edges (see edge_is_top_left); `orient` = sign of the fixed-point area.
+/// Top-left fill rule for pixel centres exactly on an edge, so that triangles sharing an edge never both (or
+/// neither) cover a pixel: an edge counts when the interior lies below a horizontal edge or right of it.
+/// `orient` = sign of the fixed-point area.
 DD_HOST_DEVICE bool edge_is_top_left_fixed(FixedPoint2 a, FixedPoint2 b, long long orient) {
   const long long ex = orient * (b.x - a.x), ey = orient * (b.y - a.y);
   return (ey == 0 && ex > 0) || ey < 0;

@@ -13,9 +13,6 @@ struct Vec3f {
   float x, y, z;
 };
 
-DD_HOST_DEVICE Vec2f make_vec2(float x, float y) { return Vec2f{x, y}; }
-DD_HOST_DEVICE Vec3f make_vec3(float x, float y, float z) { return Vec3f{x, y, z}; }
-
 DD_HOST_DEVICE Vec2f operator+(Vec2f a, Vec2f b) { return {a.x + b.x, a.y + b.y}; }
 DD_HOST_DEVICE Vec2f operator-(Vec2f a, Vec2f b) { return {a.x - b.x, a.y - b.y}; }
 DD_HOST_DEVICE Vec2f operator*(float s, Vec2f a) { return {s * a.x, s * a.y}; }
