@@ -2,6 +2,8 @@
 // Pinhole camera. Units: pixels. Integer pixel coordinates are pixel centres (OpenCV convention); the image
 // spans [-0.5, width - 0.5] x [-0.5, height - 0.5]. Frame: OpenCV optical (x right, y down, z forward).
 #include <Eigen/Core>
+#include <Eigen/Geometry>
+#include <vector>
 #include <string>
 
 #include "diffdope/kernels/projection.hpp"
@@ -22,6 +24,12 @@ struct Camera {
   Camera scaled(double scale) const;
   /// The camera of the same view resized to width x height.
   Camera resized(int new_width, int new_height) const;
+
+  /// Pixel position of a camera-frame point (z > 0).
+  Eigen::Vector2d project(const Eigen::Vector3d& X) const { return {fx * X.x() / X.z() + cx, fy * X.y() / X.z() + cy}; }
+  /// Pixel bounding box of `points` (camera frame, e.g. a model's box corners moved by its pose); empty when a
+  /// point is not beyond `min_z` metres (the projection of such a set is unbounded).
+  Eigen::AlignedBox2d project_bounds(const std::vector<Eigen::Vector3d>& points, double min_z) const;
 
   /// 3x3 intrinsic matrix K.
   Eigen::Matrix3d K() const;

@@ -6,6 +6,7 @@
 #include <vector>
 
 #include "diffdope/kernels/mesh_view.hpp"
+#include "diffdope/pose.hpp"
 
 namespace diffdope {
 
@@ -57,8 +58,9 @@ class Mesh {
   Eigen::Vector3d bbox_max() const { return bbox_max_; }
   Eigen::Vector3d center() const { return 0.5 * (bbox_min_ + bbox_max_); }  // bounding-box centre
   double diameter() const { return diameter_; }  // largest distance between two vertices, metres
-  /// The 8 corners of the bounding box.
+  /// The 8 corners of the bounding box, optionally moved by `pose` (model -> camera).
   std::vector<Eigen::Vector3d> bbox_corners() const;
+  std::vector<Eigen::Vector3d> bbox_corners(const Pose& pose) const;
 
   /// Per triangle edge k (v_k -> v_k+1): the triangle across it, or -1 at a border / non-manifold edge.
   const std::vector<int>& neighbors() const { return neighbors_; }

@@ -18,6 +18,15 @@ Camera Camera::scaled(double scale) const {
   return resized(w, h);
 }
 
+Eigen::AlignedBox2d Camera::project_bounds(const std::vector<Eigen::Vector3d>& points, double min_z) const {
+  Eigen::AlignedBox2d box;  // empty
+  for (const Eigen::Vector3d& X : points) {
+    if (!(X.z() > min_z)) return Eigen::AlignedBox2d();
+    box.extend(project(X));
+  }
+  return box;
+}
+
 Eigen::Matrix3d Camera::K() const {
   Eigen::Matrix3d k;
   k << fx, 0, cx, 0, fy, cy, 0, 0, 1;

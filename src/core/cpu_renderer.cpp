@@ -59,7 +59,8 @@ struct CallContext {
   Rect mask_box;    // bounding box of S > 0 (whole image when S is implicit all-ones)
   bool use_roi = true;
   int margin = 2;
-  std::vector<Eigen::Vector3d> bbox_corners;
+  Camera camera;
+  const Mesh* source_mesh = nullptr;  // for its bounding box (region of interest)
 };
 
 class CpuRenderer final : public Renderer {
@@ -98,7 +99,8 @@ CallContext CpuRenderer::make_context(const Camera& camera, const Mesh& mesh, co
   ctx.cull = options_.cull_back_faces || (options_.auto_cull_closed && mesh.closed_and_outward());
   ctx.use_roi = options_.use_roi;
   ctx.margin = std::max(1, options_.roi_margin);
-  ctx.bbox_corners = mesh.bbox_corners();
+  ctx.camera = camera;
+  ctx.source_mesh = &mesh;
   if (mask.empty()) {
     if (no_mask_means_everywhere) ctx.mask_box = {0, 0, camera.width, camera.height};  // S = 1 everywhere
   } else {
@@ -130,21 +132,12 @@ Rect CpuRenderer::rasterize(const CallContext& ctx, const Pose& pose, Workspace&
   // Region of interest: projected model box U observed mask box, plus margin.
   Rect roi{0, 0, K.width, K.height};
   if (ctx.use_roi) {
-    Rect model{0, 0, K.width, K.height};
-    double xmin = 1e30, ymin = 1e30, xmax = -1e30, ymax = -1e30;
-    bool all_front = true;
-    for (const auto& c : ctx.bbox_corners) {
-      const Eigen::Vector3d X = pose * c;
-      if (!(X.z() > ctx.near_z)) {
-        all_front = false;
-        break;
-      }
-      const double u = K.fx * X.x() / X.z() + K.cx, v = K.fy * X.y() / X.z() + K.cy;
-      xmin = std::min(xmin, u), xmax = std::max(xmax, u), ymin = std::min(ymin, v), ymax = std::max(ymax, v);
-    }
-    if (all_front) {
-      model = {static_cast<int>(std::floor(std::max(xmin, -1e6))), static_cast<int>(std::floor(std::max(ymin, -1e6))),
-               static_cast<int>(std::ceil(std::min(xmax, 1e6))) + 1, static_cast<int>(std::ceil(std::min(ymax, 1e6))) + 1};
+    Rect model{0, 0, K.width, K.height};  // unbounded projection (box reaches the near plane): whole image
+    const Eigen::AlignedBox2d b = ctx.camera.project_bounds(ctx.source_mesh->bbox_corners(pose), ctx.near_z);
+    if (!b.isEmpty()) {
+      const Eigen::Vector2d lo = b.min().cwiseMax(-1e6), hi = b.max().cwiseMin(1e6);
+      model = {static_cast<int>(std::floor(lo.x())), static_cast<int>(std::floor(lo.y())),
+               static_cast<int>(std::ceil(hi.x())) + 1, static_cast<int>(std::ceil(hi.y())) + 1};
     }
     roi = unite(model, ctx.mask_box);
     roi = {std::max(0, roi.x0 - ctx.margin), std::max(0, roi.y0 - ctx.margin),

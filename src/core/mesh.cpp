@@ -196,6 +196,12 @@ std::vector<Eigen::Vector3d> Mesh::bbox_corners() const {
   return c;
 }
 
+std::vector<Eigen::Vector3d> Mesh::bbox_corners(const Pose& pose) const {
+  std::vector<Eigen::Vector3d> c = bbox_corners();
+  for (auto& p : c) p = pose * p;
+  return c;
+}
+
 MeshView Mesh::view(std::vector<TextureView>& storage) const {
   storage.clear();
   for (const Texture& t : textures) {

@@ -34,17 +34,12 @@ Refiner::Refiner(const RefinerOptions& options) : options_(options) {
 namespace {
 
 cv::Mat window_mask(const Camera& cam, const Mesh& mesh, const Pose& pose, double grow) {
-  double x0 = 1e30, y0 = 1e30, x1 = -1e30, y1 = -1e30;
-  for (const auto& c : mesh.bbox_corners()) {
-    const Eigen::Vector3d X = pose * c;
-    if (X.z() <= 1e-3) return cv::Mat(cam.height, cam.width, CV_32F, cv::Scalar(1.0));
-    const double u = cam.fx * X.x() / X.z() + cam.cx, v = cam.fy * X.y() / X.z() + cam.cy;
-    x0 = std::min(x0, u), x1 = std::max(x1, u), y0 = std::min(y0, v), y1 = std::max(y1, v);
-  }
-  const double gx = grow * (x1 - x0), gy = grow * (y1 - y0);
+  const Eigen::AlignedBox2d b = cam.project_bounds(mesh.bbox_corners(pose), 1e-3);
+  if (b.isEmpty()) return cv::Mat(cam.height, cam.width, CV_32F, cv::Scalar(1.0));
+  const Eigen::Vector2d g = grow * b.sizes();
   cv::Mat m = cv::Mat::zeros(cam.height, cam.width, CV_32F);
-  const cv::Rect r(cv::Point(int(std::floor(x0 - gx)), int(std::floor(y0 - gy))),
-                   cv::Point(int(std::ceil(x1 + gx)) + 1, int(std::ceil(y1 + gy)) + 1));
+  const cv::Rect r(cv::Point(int(std::floor(b.min().x() - g.x())), int(std::floor(b.min().y() - g.y()))),
+                   cv::Point(int(std::ceil(b.max().x() + g.x())) + 1, int(std::ceil(b.max().y() + g.y())) + 1));
   m(r & cv::Rect(0, 0, cam.width, cam.height)).setTo(1.0);
   return m;
 }

@@ -369,17 +369,12 @@ void check_init_in_view(const std::string& path, const Pose& pose, const Mesh& m
   if (!(c.z() > near_plane))
     fail(path, "the initial pose puts the object behind the camera (centre z = " + std::to_string(c.z()) + " m)" +
                    hint);
-  double x0 = 1e300, y0 = 1e300, x1 = -1e300, y1 = -1e300;
-  for (const auto& p : mesh.bbox_corners()) {
-    const Eigen::Vector3d X = pose * p;
-    if (X.z() <= 1e-6) return;  // straddles the camera plane: let the refiner judge
-    const double u = cam.fx * X.x() / X.z() + cam.cx, v = cam.fy * X.y() / X.z() + cam.cy;
-    x0 = std::min(x0, u), x1 = std::max(x1, u), y0 = std::min(y0, v), y1 = std::max(y1, v);
-  }
+  const Eigen::AlignedBox2d b = cam.project_bounds(mesh.bbox_corners(pose), 1e-6);
+  if (b.isEmpty()) return;  // straddles the camera plane: let the refiner judge
+  const double x0 = b.min().x(), y0 = b.min().y(), x1 = b.max().x(), y1 = b.max().y();
   if (x1 < -0.5 || y1 < -0.5 || x0 > cam.width - 0.5 || y0 > cam.height - 0.5)
     fail(path, "the initial pose puts the object outside the image (centre projects to (" +
-                   std::to_string(cam.fx * c.x() / c.z() + cam.cx) + ", " +
-                   std::to_string(cam.fy * c.y() / c.z() + cam.cy) + "))" + hint);
+                   std::to_string(cam.project(c).x()) + ", " + std::to_string(cam.project(c).y()) + "))" + hint);
 }
 
 // ---- Outputs ----
