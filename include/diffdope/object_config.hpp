@@ -1,0 +1,60 @@
+#pragma once
+// The objects a refiner node tracks, read from YAML (ROS-free, so tools and tests can read the same file).
+//
+//   refiner:                # optional: RefinerOptions, the same keys as config/default.yaml
+//     iterations: 60
+//   objects:
+//     - name: cracker                       # [a-zA-Z0-9_]: used in topic and TF frame names
+//       mesh: package://my_pkg/meshes/cracker.ply   # or an absolute path, file://, or relative to this file
+//       mesh_scale: 0.01                    # metres per mesh unit (default 1)
+//       symmetric: false                    # scored with ADD-S when true (evaluation only)
+//       mask_label: 3                       # label-image value of this object; -1 (default): any nonzero pixel
+//       pose_topic: /dope/pose_cracker      # detector PoseStamped topic (default /dope/pose_<name>)
+//       model_transform:                    # pose of the mesh in the object frame the detector reports
+//         translation: [0, 0, 0]            # metres
+//         rotation: [0, 0, 0, 1]            # quaternion x y z w
+#include <functional>
+#include <string>
+#include <vector>
+
+#include "diffdope/pose.hpp"
+#include "diffdope/refiner.hpp"
+
+namespace diffdope {
+
+struct ObjectConfig {
+  std::string name;
+  std::string mesh;        // as written in the file (package://, file://, absolute or relative path)
+  std::string mesh_path;   // resolved absolute file path
+  double mesh_scale = 1.0; // metres per mesh unit
+  bool symmetric = false;
+  int mask_label = -1;     // -1: any nonzero mask pixel belongs to the object
+  std::string pose_topic;  // empty: the node's default (/dope/pose_<name>)
+  Pose model_transform;    // mesh frame -> object (detector) frame; identity by default
+};
+
+struct ObjectsConfig {
+  std::vector<ObjectConfig> objects;
+  RefinerOptions refiner;
+};
+
+/// Turns a package:// URL into a file path (the ROS layer passes ros::package::getPath); throws when unknown.
+using PackageResolver = std::function<std::string(const std::string& package)>;
+
+/// Reads and checks the file: unique valid names, required keys, no unknown keys, finite transform, positive
+/// scale. Mesh paths are resolved but not opened (a missing mesh disables one object, not the config).
+/// Throws std::runtime_error naming the file, the object and the key.
+ObjectsConfig load_objects_config(const std::string& path, const PackageResolver& resolve_package = {},
+                                  const RefinerOptions& base = RefinerOptions());
+ObjectsConfig parse_objects_config(const std::string& yaml, const std::string& origin,
+                                   const std::string& base_dir, const PackageResolver& resolve_package = {},
+                                   const RefinerOptions& base = RefinerOptions());
+
+/// Resolves a mesh reference: package://pkg/rel, file:///abs, /abs, or a path relative to base_dir.
+std::string resolve_mesh_path(const std::string& mesh, const std::string& base_dir,
+                              const PackageResolver& resolve_package);
+
+/// Loads the object's mesh (scaled to metres, model_transform not applied). Throws std::runtime_error.
+Mesh load_object_mesh(const ObjectConfig& object);
+
+}  // namespace diffdope

@@ -1,0 +1,175 @@
+#pragma once
+// diffdope_ros/RefinerNodelet: the ROS glue around diffdope::Refiner. Thin by design:
+//   - inputs: synchronized RGB (+ depth, + mask) and camera_info; detector poses (per-object PoseStamped topics
+//     and an InitialPoseArray topic) transformed with tf2 into the camera optical frame;
+//   - a worker thread runs every refinement (streaming frames and service requests), so callbacks, the
+//     service and TF never wait on each other;
+//   - outputs: TF, per-object PoseStamped, RefinedPoseArray with scores, overlay image, markers, diagnostics.
+// Parameters and topics: README.md ("ROS node").
+#include <cv_bridge/cv_bridge.h>
+#include <diagnostic_updater/diagnostic_updater.h>
+#include <geometry_msgs/PoseStamped.h>
+#include <image_transport/image_transport.h>
+#include <image_transport/subscriber_filter.h>
+#include <message_filters/subscriber.h>
+#include <message_filters/sync_policies/approximate_time.h>
+#include <message_filters/synchronizer.h>
+#include <nodelet/nodelet.h>
+#include <ros/ros.h>
+#include <sensor_msgs/CameraInfo.h>
+#include <sensor_msgs/Image.h>
+#include <tf2_ros/buffer.h>
+#include <tf2_ros/transform_broadcaster.h>
+#include <tf2_ros/transform_listener.h>
+
+#include <condition_variable>
+#include <deque>
+#include <future>
+#include <memory>
+#include <mutex>
+#include <optional>
+#include <thread>
+
+#include "diffdope/mesh.hpp"
+#include "diffdope/object_config.hpp"
+#include "diffdope/object_track.hpp"
+#include "diffdope/refiner.hpp"
+#include "diffdope_ros/InitialPoseArray.h"
+#include "diffdope_ros/Refine.h"
+#include "diffdope_ros/RefinedPoseArray.h"
+#include "diffdope_ros/error_reporter.hpp"
+
+namespace diffdope_ros {
+
+class RefinerNodelet : public nodelet::Nodelet {
+ public:
+  RefinerNodelet() = default;
+  ~RefinerNodelet() override;  // explicit teardown order: worker, timers, filters, synchronizers
+
+ private:
+  enum class Mode { kContinuous, kTracking, kOnRequest };
+
+  /// One synchronized, converted input set.
+  struct Frame {
+    std_msgs::Header header;  // the RGB image's stamp and optical frame
+    diffdope::Camera camera;
+    diffdope::Observation observation;  // rgb (+ depth); masks are per object
+    cv::Mat labels;                     // mask / label image, empty without a mask
+    sensor_msgs::ImageConstPtr rgb_msg; // for the overlay
+    ros::WallTime received;
+  };
+
+  /// A configured object: its mesh (null when it failed to load: the object is disabled), its track and topics.
+  struct Slot {
+    diffdope::ObjectConfig config;
+    std::unique_ptr<diffdope::Mesh> mesh;
+    std::string disabled_reason;
+    diffdope::ObjectTrack track;
+    std::optional<geometry_msgs::PoseStamped> pending_detection;  // raw detector message, any frame
+    ros::Subscriber detection_sub;
+    ros::Publisher pose_pub;
+  };
+
+  /// A unit of worker work: the next streaming frame, or a service request waiting for its response.
+  struct Request {
+    diffdope_ros::Refine::Request request;
+    std::promise<diffdope_ros::Refine::Response> response;
+  };
+
+  void onInit() override;
+  void loadParameters();
+  void loadObjects();
+  void setupInputs();
+
+  // Input callbacks (nodelet's single-threaded queue): convert, validate, hand over. Never refine here.
+  void onImages(const sensor_msgs::ImageConstPtr& rgb, const sensor_msgs::CameraInfoConstPtr& info,
+                const sensor_msgs::ImageConstPtr& depth, const sensor_msgs::ImageConstPtr& mask);
+  void onSync2(const sensor_msgs::ImageConstPtr& rgb, const sensor_msgs::CameraInfoConstPtr& info);
+  void onSync3(const sensor_msgs::ImageConstPtr& rgb, const sensor_msgs::CameraInfoConstPtr& info,
+               const sensor_msgs::ImageConstPtr& third);
+  void onSync4(const sensor_msgs::ImageConstPtr& rgb, const sensor_msgs::CameraInfoConstPtr& info,
+               const sensor_msgs::ImageConstPtr& depth, const sensor_msgs::ImageConstPtr& mask);
+  void onDetection(const geometry_msgs::PoseStampedConstPtr& msg, size_t slot);
+  void onInitialPoses(const diffdope_ros::InitialPoseArrayConstPtr& msg);
+  void storeDetection(const geometry_msgs::PoseStamped& pose, size_t slot, const std::string& origin);
+  bool onRefineService(diffdope_ros::Refine::Request& req, diffdope_ros::Refine::Response& res);
+  void onWatchdog(const ros::WallTimerEvent&);
+  void onDiagnostics(diagnostic_updater::DiagnosticStatusWrapper& stat);
+
+  // Worker thread.
+  void workerLoop();
+  void processStreaming(const std::shared_ptr<const Frame>& frame);
+  diffdope_ros::Refine::Response processRequest(const diffdope_ros::Refine::Request& req,
+                                                const std::shared_ptr<const Frame>& frame);
+  /// Transforms a detector / caller pose into the camera frame at the image stamp and returns the mesh pose.
+  /// Throws std::runtime_error (TF failure, NaN, behind the camera).
+  diffdope::Pose meshPoseInCamera(const geometry_msgs::PoseStamped& pose, const Slot& slot, const Frame& frame);
+  void absorbDetections(const Frame& frame);
+  std::vector<diffdope_ros::RefinedPose> refineAndPublish(const Frame& frame,
+                                                          const std::vector<std::pair<size_t, diffdope::Seed>>& seeds,
+                                                          const diffdope::RefinerOptions& options);
+  void publishOverlay(const Frame& frame, const std::vector<size_t>& slots,
+                      const std::vector<diffdope::RefineResult>& results);
+  void publishMarkers(const Frame& frame, const std::vector<size_t>& slots,
+                      const std::vector<diffdope::RefineResult>& results);
+
+  // Parameters.
+  Mode mode_ = Mode::kTracking;
+  bool use_depth_ = true, use_mask_ = false, publish_tf_ = true, publish_implausible_ = false;
+  int queue_size_ = 10;
+  double max_interval_ = 0.1, sync_timeout_ = 3.0, tf_timeout_ = 0.1;
+  std::string frame_prefix_, fixed_frame_, detection_prefix_;
+  diffdope::TrackOptions track_options_;
+  diffdope::RefinerOptions refiner_options_;
+
+  ErrorReporter errors_;
+  std::vector<std::unique_ptr<Slot>> slots_;
+  std::mutex detections_mutex_;  // Slot::pending_detection
+
+  // Inputs.
+  std::unique_ptr<image_transport::ImageTransport> it_;
+  image_transport::SubscriberFilter rgb_sub_, depth_sub_, mask_sub_;
+  message_filters::Subscriber<sensor_msgs::CameraInfo> info_sub_;
+  using Policy2 = message_filters::sync_policies::ApproximateTime<sensor_msgs::Image, sensor_msgs::CameraInfo>;
+  using Policy3 = message_filters::sync_policies::ApproximateTime<sensor_msgs::Image, sensor_msgs::CameraInfo,
+                                                                  sensor_msgs::Image>;
+  using Policy4 = message_filters::sync_policies::ApproximateTime<sensor_msgs::Image, sensor_msgs::CameraInfo,
+                                                                  sensor_msgs::Image, sensor_msgs::Image>;
+  std::unique_ptr<message_filters::Synchronizer<Policy2>> sync2_;
+  std::unique_ptr<message_filters::Synchronizer<Policy3>> sync3_;
+  std::unique_ptr<message_filters::Synchronizer<Policy4>> sync4_;
+  ros::Subscriber initial_poses_sub_;
+  ros::ServiceServer refine_srv_;
+  ros::WallTimer watchdog_timer_;
+
+  // Outputs.
+  std::unique_ptr<tf2_ros::Buffer> tf_buffer_;
+  std::unique_ptr<tf2_ros::TransformListener> tf_listener_;
+  std::unique_ptr<tf2_ros::TransformBroadcaster> tf_broadcaster_;
+  ros::Publisher refined_pub_, markers_pub_;
+  image_transport::Publisher overlay_pub_;
+  std::unique_ptr<diagnostic_updater::Updater> diagnostics_;
+
+  // Hand-over between callbacks and the worker.
+  std::mutex work_mutex_;
+  std::condition_variable work_cv_;
+  std::shared_ptr<const Frame> latest_frame_;  // newest synchronized frame (kept for service calls)
+  bool frame_pending_ = false;                 // latest_frame_ not yet processed by streaming
+  std::deque<std::shared_ptr<Request>> requests_;
+  bool stop_ = false;
+  std::thread worker_;
+
+  // Statistics (work_mutex_).
+  struct Stats {
+    long frames_synced = 0, frames_skipped = 0, frames_refined = 0, objects_refined = 0, implausible = 0;
+    double last_latency = -1, latency_sum = 0, last_refine_ms = 0;
+    ros::WallTime first_refined, last_refined;
+  } stats_;
+  ros::WallTime last_arrival_[4];  // rgb, info, depth, mask (wall time of the last message of each)
+  ros::Time last_stamp_[4];
+  ros::WallTime last_sync_;
+  std::mutex arrival_mutex_;
+  void noteArrival(int index, const std_msgs::Header& header);
+};
+
+}  // namespace diffdope_ros

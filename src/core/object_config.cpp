@@ -1,0 +1,158 @@
+// Objects YAML (see include/diffdope/object_config.hpp).
+#include "diffdope/object_config.hpp"
+
+#include <yaml-cpp/yaml.h>
+
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <set>
+#include <sstream>
+#include <stdexcept>
+
+namespace diffdope {
+namespace {
+
+bool valid_name(const std::string& s) {
+  if (s.empty()) return false;
+  for (char c : s)
+    if (!(std::isalnum(static_cast<unsigned char>(c)) || c == '_')) return false;
+  return !std::isdigit(static_cast<unsigned char>(s[0]));
+}
+
+std::vector<double> read_vector(const YAML::Node& n, size_t size, const std::string& where) {
+  if (!n.IsSequence() || n.size() != size)
+    throw std::runtime_error(where + ": expected a list of " + std::to_string(size) + " numbers");
+  std::vector<double> v;
+  for (const auto& e : n) {
+    const double x = e.as<double>();
+    if (!std::isfinite(x)) throw std::runtime_error(where + ": not a finite number");
+    v.push_back(x);
+  }
+  return v;
+}
+
+Pose read_transform(const YAML::Node& n, const std::string& where) {
+  if (!n.IsMap()) throw std::runtime_error(where + ": expected translation and rotation");
+  Pose p;
+  for (const auto& kv : n) {
+    const std::string key = kv.first.as<std::string>();
+    if (key == "translation") {
+      const auto t = read_vector(kv.second, 3, where + ".translation");
+      p.t = Eigen::Vector3d(t[0], t[1], t[2]);
+    } else if (key == "rotation") {
+      const auto q = read_vector(kv.second, 4, where + ".rotation (x y z w)");
+      if (std::sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]) < 1e-6)
+        throw std::runtime_error(where + ".rotation: zero quaternion");
+      p = Pose::from_quaternion(q[0], q[1], q[2], q[3], p.t);
+    } else {
+      throw std::runtime_error(where + ": unknown key '" + key + "' (translation, rotation)");
+    }
+  }
+  return p;
+}
+
+}  // namespace
+
+std::string resolve_mesh_path(const std::string& mesh, const std::string& base_dir,
+                              const PackageResolver& resolve_package) {
+  namespace fs = std::filesystem;
+  const std::string pkg_prefix = "package://", file_prefix = "file://";
+  if (mesh.rfind(pkg_prefix, 0) == 0) {
+    const std::string rest = mesh.substr(pkg_prefix.size());
+    const size_t slash = rest.find('/');
+    if (slash == std::string::npos || slash == 0) throw std::runtime_error("'" + mesh + "': expected package://PKG/PATH");
+    if (!resolve_package) throw std::runtime_error("'" + mesh + "': package:// URLs need ROS to resolve");
+    const std::string root = resolve_package(rest.substr(0, slash));
+    if (root.empty()) throw std::runtime_error("'" + mesh + "': package '" + rest.substr(0, slash) + "' not found");
+    return (fs::path(root) / rest.substr(slash + 1)).lexically_normal().string();
+  }
+  if (mesh.rfind(file_prefix, 0) == 0) return mesh.substr(file_prefix.size());
+  const fs::path p(mesh);
+  if (p.is_absolute()) return p.lexically_normal().string();
+  return (fs::path(base_dir) / p).lexically_normal().string();
+}
+
+ObjectsConfig parse_objects_config(const std::string& yaml, const std::string& origin, const std::string& base_dir,
+                                   const PackageResolver& resolve_package, const RefinerOptions& base) {
+  YAML::Node root;
+  try {
+    root = YAML::Load(yaml);
+  } catch (const YAML::Exception& e) {
+    throw std::runtime_error(origin + ": not valid YAML: " + e.what());
+  }
+  if (!root.IsMap()) throw std::runtime_error(origin + ": expected a mapping with 'objects' (and 'refiner')");
+  ObjectsConfig cfg;
+  cfg.refiner = base;
+  for (const auto& kv : root) {
+    const std::string key = kv.first.as<std::string>();
+    if (key == "refiner") {
+      YAML::Emitter out;
+      out << kv.second;
+      cfg.refiner = RefinerOptions::from_yaml_string(out.c_str(), base, origin + " (refiner)");
+    } else if (key != "objects") {
+      throw std::runtime_error(origin + ": unknown key '" + key + "' (objects, refiner)");
+    }
+  }
+  const YAML::Node objects = root["objects"];
+  if (!objects || !objects.IsSequence() || objects.size() == 0)
+    throw std::runtime_error(origin + ": 'objects' must be a non-empty list");
+  std::set<std::string> names;
+  for (size_t i = 0; i < objects.size(); ++i) {
+    const YAML::Node n = objects[i];
+    std::string where = origin + ": objects[" + std::to_string(i) + "]";
+    if (!n.IsMap()) throw std::runtime_error(where + ": expected a mapping");
+    ObjectConfig o;
+    try {
+      for (const auto& kv : n) {
+        const std::string key = kv.first.as<std::string>();
+        if (key == "name") o.name = kv.second.as<std::string>();
+        else if (key == "mesh") o.mesh = kv.second.as<std::string>();
+        else if (key == "mesh_scale") o.mesh_scale = kv.second.as<double>();
+        else if (key == "symmetric") o.symmetric = kv.second.as<bool>();
+        else if (key == "mask_label") o.mask_label = kv.second.as<int>();
+        else if (key == "pose_topic") o.pose_topic = kv.second.as<std::string>();
+        else if (key == "model_transform") o.model_transform = read_transform(kv.second, where + ".model_transform");
+        else
+          throw std::runtime_error(where + ": unknown key '" + key +
+                                   "' (name, mesh, mesh_scale, symmetric, mask_label, pose_topic, model_transform)");
+      }
+    } catch (const YAML::Exception& e) {
+      throw std::runtime_error(where + ": " + e.what());
+    }
+    if (!valid_name(o.name))
+      throw std::runtime_error(where + ": 'name' must be a non-empty identifier [a-zA-Z_][a-zA-Z0-9_]*, got '" +
+                               o.name + "'");
+    where = origin + ": object '" + o.name + "'";
+    if (!names.insert(o.name).second) throw std::runtime_error(where + ": name used twice");
+    if (o.mesh.empty()) throw std::runtime_error(where + ": 'mesh' is required");
+    if (!(o.mesh_scale > 0) || !std::isfinite(o.mesh_scale))
+      throw std::runtime_error(where + ": 'mesh_scale' must be positive");
+    if (o.mask_label < -1) throw std::runtime_error(where + ": 'mask_label' must be -1 or a label value >= 0");
+    try {
+      o.mesh_path = resolve_mesh_path(o.mesh, base_dir, resolve_package);
+    } catch (const std::exception& e) {  // name the file and the object, not only the URL
+      throw std::runtime_error(where + ": 'mesh' " + e.what());
+    }
+    cfg.objects.push_back(o);
+  }
+  return cfg;
+}
+
+ObjectsConfig load_objects_config(const std::string& path, const PackageResolver& resolve_package,
+                                  const RefinerOptions& base) {
+  std::ifstream in(path);
+  if (!in) throw std::runtime_error(path + ": cannot open the objects config");
+  std::stringstream ss;
+  ss << in.rdbuf();
+  const std::string dir = std::filesystem::absolute(path).parent_path().string();
+  return parse_objects_config(ss.str(), path, dir, resolve_package, base);
+}
+
+Mesh load_object_mesh(const ObjectConfig& object) {
+  MeshLoadOptions mo;
+  mo.scale = object.mesh_scale;
+  return Mesh::load(object.mesh_path, mo);
+}
+
+}  // namespace diffdope

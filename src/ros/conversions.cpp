@@ -1,0 +1,140 @@
+#include "diffdope_ros/conversions.hpp"
+
+#include <cv_bridge/cv_bridge.h>
+#include <sensor_msgs/image_encodings.h>
+
+#include <cmath>
+#include <opencv2/imgproc.hpp>
+#include <stdexcept>
+
+#include "diffdope/observation.hpp"
+
+namespace diffdope_ros {
+namespace enc = sensor_msgs::image_encodings;
+
+namespace {
+
+void check_size(const sensor_msgs::Image& image, const char* what) {
+  if (image.width == 0 || image.height == 0)
+    throw std::invalid_argument(std::string(what) + " image is empty (" + std::to_string(image.width) + "x" +
+                                std::to_string(image.height) + ")");
+  const size_t need = size_t(image.step) * image.height;
+  if (image.data.size() < need || image.step == 0)
+    throw std::invalid_argument(std::string(what) + " image: data size " + std::to_string(image.data.size()) +
+                                " does not match step " + std::to_string(image.step) + " x height " +
+                                std::to_string(image.height));
+}
+
+cv::Mat share(const sensor_msgs::Image& image, const char* what) {
+  try {
+    // toCvCopy on a borrowed message is what cv_bridge offers for a const reference; the copy is one frame.
+    return cv_bridge::toCvCopy(image, image.encoding)->image;
+  } catch (const cv_bridge::Exception& e) {
+    throw std::invalid_argument(std::string(what) + " image: " + e.what());
+  }
+}
+
+}  // namespace
+
+diffdope::Camera camera_from_info(const sensor_msgs::CameraInfo& info, std::string* warning) {
+  if (info.width == 0 || info.height == 0)
+    throw std::invalid_argument("camera_info: width/height are zero (" + std::to_string(info.width) + "x" +
+                                std::to_string(info.height) + ")");
+  if (info.binning_x > 1 || info.binning_y > 1 || info.roi.width != 0 || info.roi.height != 0)
+    throw std::invalid_argument("camera_info: binning/ROI are not supported (publish full-resolution rectified images)");
+  for (double v : info.P)
+    if (!std::isfinite(v)) throw std::invalid_argument("camera_info: P has a non-finite value");
+  for (double v : info.K)
+    if (!std::isfinite(v)) throw std::invalid_argument("camera_info: K has a non-finite value");
+  double fx = info.P[0], fy = info.P[5], cx = info.P[2], cy = info.P[6];
+  if (fx == 0 && fy == 0 && cx == 0 && cy == 0) {
+    fx = info.K[0], fy = info.K[4], cx = info.K[2], cy = info.K[5];
+    if (fx != 0 && warning)
+      *warning = "camera_info: P is all zero, using K (the images are assumed rectified)";
+  }
+  if (!(fx > 0) || !(fy > 0))
+    throw std::invalid_argument("camera_info: focal length is zero or negative in P and K (fx=" +
+                                std::to_string(fx) + ", fy=" + std::to_string(fy) + ")");
+  return diffdope::Camera(fx, fy, cx, cy, int(info.width), int(info.height));
+}
+
+cv::Mat rgb_from_image(const sensor_msgs::Image& image) {
+  const std::string& e = image.encoding;
+  if (e != enc::RGB8 && e != enc::BGR8 && e != enc::RGBA8 && e != enc::BGRA8 && e != enc::MONO8)
+    throw std::invalid_argument("rgb image: unsupported encoding '" + e + "' (rgb8, bgr8, rgba8, bgra8, mono8)");
+  check_size(image, "rgb");
+  cv::Mat m = share(image, "rgb");
+  if (e == enc::RGBA8) cv::cvtColor(m, m, cv::COLOR_RGBA2RGB);
+  if (e == enc::BGRA8) cv::cvtColor(m, m, cv::COLOR_BGRA2BGR);
+  return diffdope::to_rgb_float(m, e == enc::BGR8 || e == enc::BGRA8, "rgb image");
+}
+
+cv::Mat depth_from_image(const sensor_msgs::Image& image) {
+  const std::string& e = image.encoding;
+  double metres_per_unit;
+  if (e == enc::TYPE_16UC1 || e == enc::MONO16) metres_per_unit = 0.001;  // REP 118: uint16 depth is millimetres
+  else if (e == enc::TYPE_32FC1) metres_per_unit = 1.0;
+  else
+    throw std::invalid_argument("depth image: unsupported encoding '" + e + "' (16UC1 millimetres, 32FC1 metres)");
+  check_size(image, "depth");
+  return diffdope::to_depth_metres(share(image, "depth"), metres_per_unit, "depth image");
+}
+
+cv::Mat labels_from_image(const sensor_msgs::Image& image) {
+  const std::string& e = image.encoding;
+  if (e != enc::MONO8 && e != enc::TYPE_8UC1 && e != enc::MONO16 && e != enc::TYPE_16UC1)
+    throw std::invalid_argument("mask image: unsupported encoding '" + e + "' (mono8/8UC1, or mono16/16UC1 labels)");
+  check_size(image, "mask");
+  return share(image, "mask");
+}
+
+cv::Mat object_mask(const cv::Mat& labels, int label) {
+  cv::Mat m8 = label < 0 ? (labels != 0) : (labels == label);
+  cv::Mat out;
+  m8.convertTo(out, CV_32F, 1.0 / 255.0);
+  return out;
+}
+
+diffdope::Pose pose_from_msg(const geometry_msgs::Pose& m, const std::string& what) {
+  const double v[7] = {m.position.x, m.position.y, m.position.z, m.orientation.x, m.orientation.y,
+                       m.orientation.z, m.orientation.w};
+  for (double x : v)
+    if (!std::isfinite(x)) throw std::invalid_argument(what + ": pose has a NaN or infinite component");
+  const double n = std::sqrt(v[3] * v[3] + v[4] * v[4] + v[5] * v[5] + v[6] * v[6]);
+  if (n < 1e-6) throw std::invalid_argument(what + ": pose orientation is a zero quaternion");
+  return diffdope::Pose::from_quaternion(v[3], v[4], v[5], v[6], Eigen::Vector3d(v[0], v[1], v[2]));
+}
+
+geometry_msgs::Pose pose_to_msg(const diffdope::Pose& p) {
+  geometry_msgs::Pose m;
+  m.position.x = p.t.x();
+  m.position.y = p.t.y();
+  m.position.z = p.t.z();
+  const auto q = p.quaternion_xyzw();
+  m.orientation.x = q[0];
+  m.orientation.y = q[1];
+  m.orientation.z = q[2];
+  m.orientation.w = q[3];
+  return m;
+}
+
+diffdope::Pose pose_from_transform(const geometry_msgs::Transform& t, const std::string& what) {
+  geometry_msgs::Pose p;
+  p.position.x = t.translation.x;
+  p.position.y = t.translation.y;
+  p.position.z = t.translation.z;
+  p.orientation = t.rotation;
+  return pose_from_msg(p, what);
+}
+
+geometry_msgs::Transform transform_to_msg(const diffdope::Pose& pose) {
+  const geometry_msgs::Pose p = pose_to_msg(pose);
+  geometry_msgs::Transform t;
+  t.translation.x = p.position.x;
+  t.translation.y = p.position.y;
+  t.translation.z = p.position.z;
+  t.rotation = p.orientation;
+  return t;
+}
+
+}  // namespace diffdope_ros

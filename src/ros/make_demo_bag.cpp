@@ -1,0 +1,506 @@
+// diffdope_make_bag: writes the demo / test data of the ROS layer: a bag of generated camera frames with noisy
+// DOPE-like detections, the objects' meshes and the objects YAML the refiner nodelet reads.
+//
+//   diffdope_make_bag --out DIR [--frames N] [--rate HZ] [--detector-every K] [--detector-latency S]
+//                     [--objects 1|2|3] [--seed S] [--width W] [--height H] [--depth-encoding 16UC1|32FC1]
+//                     [--rot-noise-deg D] [--trans-noise-m M] [--compression none|lz4|bz2]
+//
+// DIR/demo.bag, DIR/meshes/<name>.ply (+ <name>.png texture; metres), DIR/objects.yaml (object_config.hpp).
+// Objects: box (printed box), can (cylinder, symmetric), lblock (asymmetric L-block), side by side about 0.6 m in
+// front of the camera, each turning slowly (~15 deg/s) about its own axis through its centre and drifting (~2 cm/s,
+// a smooth back-and-forth of 3 cm amplitude so long bags stay in view). Frames are composed with
+// synthesize_scene; the background (and the sensor noise pattern) is the same in every frame, as for a static
+// camera. Topics (stamp t_k = 1000 s + k / rate, written at bag time t_k unless noted):
+//   /camera/rgb/image_rect_color   sensor_msgs/Image rgb8
+//   /camera/rgb/camera_info        sensor_msgs/CameraInfo (plumb_bob, no distortion)
+//   /camera/depth/image_rect       sensor_msgs/Image 16UC1 millimetres (0 = no reading) or 32FC1 metres (NaN)
+//   /camera/mask                   sensor_msgs/Image mono8: the visible object's mask_label, 0 = background
+//   /ground_truth                  diffdope_ros/InitialPoseArray: true mesh poses in camera_color_optical_frame
+//   /dope/pose_<name>              geometry_msgs/PoseStamped in camera_link, every K-th frame, stamped t_k and
+//                                  written at t_k + detector latency (perturbed by the paper's rule)
+//   /tf_static                     tf2_msgs/TFMessage camera_link -> camera_color_optical_frame (latched)
+#include <cv_bridge/cv_bridge.h>
+#include <diffdope_ros/InitialPoseArray.h>
+#include <geometry_msgs/PoseStamped.h>
+#include <rosbag/bag.h>
+#include <rosbag/exceptions.h>
+#include <sensor_msgs/CameraInfo.h>
+#include <sensor_msgs/Image.h>
+#include <sensor_msgs/image_encodings.h>
+#include <tf2_msgs/TFMessage.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <deque>
+#include <filesystem>
+#include <fstream>
+#include <iostream>
+#include <limits>
+#include <opencv2/core.hpp>
+#include <random>
+#include <sstream>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "diffdope/object_config.hpp"
+#include "diffdope/procedural.hpp"
+#include "diffdope/synthetic.hpp"
+
+using namespace diffdope;
+namespace fs = std::filesystem;
+
+namespace {
+
+const char* const kOpticalFrame = "camera_color_optical_frame";
+const char* const kLinkFrame = "camera_link";
+
+struct Args {
+  std::string out;
+  int frames = 40;
+  double rate = 10.0;
+  int detector_every = 3;
+  double detector_latency = 0.15;
+  int objects = 3;
+  uint64_t seed = 1;
+  int width = 640, height = 480;
+  std::string depth_encoding = "16UC1";
+  double rot_noise_deg = 5.0;
+  double trans_noise_m = 0.01;
+  std::string compression = "lz4";
+};
+
+void usage(std::ostream& os) {
+  os << "usage: diffdope_make_bag --out DIR [--frames N (40)] [--rate HZ (10)] [--detector-every K (3)]\n"
+        "         [--detector-latency S (0.15)] [--objects 1|2|3 (3)] [--seed S (1)] [--width W (640)]\n"
+        "         [--height H (480)] [--depth-encoding 16UC1|32FC1 (16UC1)] [--rot-noise-deg D (5)]\n"
+        "         [--trans-noise-m M (0.01)] [--compression none|lz4|bz2 (lz4)]\n"
+        "Writes DIR/demo.bag, DIR/meshes/<name>.ply and DIR/objects.yaml (see the header of make_demo_bag.cpp).\n";
+}
+
+struct UsageError : std::runtime_error {
+  using std::runtime_error::runtime_error;
+};
+
+long long parse_int(const std::string& opt, const std::string& v, long long lo, long long hi) {
+  size_t used = 0;
+  long long x = 0;
+  try {
+    x = std::stoll(v, &used);
+  } catch (const std::exception&) {
+    used = 0;
+  }
+  if (used == 0 || used != v.size()) throw UsageError(opt + ": expected an integer, got '" + v + "'");
+  if (x < lo || x > hi)
+    throw UsageError(opt + ": " + v + " is out of range [" + std::to_string(lo) + ", " + std::to_string(hi) + "]");
+  return x;
+}
+
+double parse_double(const std::string& opt, const std::string& v, double lo, double hi, bool lo_inclusive) {
+  size_t used = 0;
+  double x = 0;
+  try {
+    x = std::stod(v, &used);
+  } catch (const std::exception&) {
+    used = 0;
+  }
+  if (used == 0 || used != v.size() || !std::isfinite(x)) throw UsageError(opt + ": expected a number, got '" + v + "'");
+  if ((lo_inclusive ? x < lo : x <= lo) || x > hi) {
+    std::ostringstream s;
+    s << opt << ": " << v << " is out of range " << (lo_inclusive ? "[" : "(") << lo << ", " << hi << "]";
+    throw UsageError(s.str());
+  }
+  return x;
+}
+
+Args parse_args(int argc, char** argv) {
+  Args a;
+  for (int i = 1; i < argc; ++i) {
+    const std::string opt = argv[i];
+    if (opt == "-h" || opt == "--help") {
+      usage(std::cout);
+      std::exit(0);
+    }
+    if (opt.rfind("--", 0) != 0) throw UsageError("unexpected argument '" + opt + "'");
+    if (i + 1 >= argc) throw UsageError(opt + ": missing value");
+    const std::string v = argv[++i];
+    if (opt == "--out") a.out = v;
+    else if (opt == "--frames") a.frames = int(parse_int(opt, v, 1, 100000));
+    else if (opt == "--rate") a.rate = parse_double(opt, v, 0.0, 1000.0, false);
+    else if (opt == "--detector-every") a.detector_every = int(parse_int(opt, v, 1, 100000));
+    else if (opt == "--detector-latency") a.detector_latency = parse_double(opt, v, 0.0, 60.0, true);
+    else if (opt == "--objects") a.objects = int(parse_int(opt, v, 1, 3));
+    else if (opt == "--seed") a.seed = uint64_t(parse_int(opt, v, 0, std::numeric_limits<long long>::max()));
+    else if (opt == "--width") a.width = int(parse_int(opt, v, 32, 8192));
+    else if (opt == "--height") a.height = int(parse_int(opt, v, 32, 8192));
+    else if (opt == "--depth-encoding") {
+      if (v != "16UC1" && v != "32FC1") throw UsageError(opt + ": expected 16UC1 or 32FC1, got '" + v + "'");
+      a.depth_encoding = v;
+    } else if (opt == "--rot-noise-deg") a.rot_noise_deg = parse_double(opt, v, 0.0, 180.0, true);
+    else if (opt == "--trans-noise-m") a.trans_noise_m = parse_double(opt, v, 0.0, 1.0, true);
+    else if (opt == "--compression") {
+      if (v != "none" && v != "lz4" && v != "bz2") throw UsageError(opt + ": expected none, lz4 or bz2, got '" + v + "'");
+      a.compression = v;
+    } else throw UsageError("unknown option '" + opt + "'");
+  }
+  if (a.out.empty()) throw UsageError("--out DIR is required");
+  return a;
+}
+
+// ---- Scene ----
+
+struct DemoObject {
+  std::string name;
+  Mesh mesh;
+  bool symmetric;
+  int label;
+};
+
+/// A slow smooth motion: a fixed-rate turn about `axis` through the mesh centre, and a back-and-forth drift of
+/// the centre along `direction` (speed `drift_speed` at its middle).
+struct Motion {
+  Eigen::Matrix3d R0;
+  Eigen::Vector3d centre0;  // camera frame, metres
+  Eigen::Vector3d axis;     // camera frame, unit
+  double turn_rate = 0;     // rad/s
+  Eigen::Vector3d direction;
+  double drift_amplitude = 0.03;  // metres
+  double drift_speed = 0.02;      // metres / s
+
+  Pose at(double tau, const Eigen::Vector3d& model_centre) const {
+    const Eigen::Matrix3d R = so3_exp(axis * (turn_rate * tau)) * R0;
+    const Eigen::Vector3d c = centre0 + direction * (drift_amplitude * std::sin(drift_speed / drift_amplitude * tau));
+    return Pose(R, c - R * model_centre);
+  }
+};
+
+Eigen::Vector3d random_unit(std::mt19937_64& rng) {
+  std::normal_distribution<double> n(0.0, 1.0);
+  Eigen::Vector3d v;
+  do v = Eigen::Vector3d(n(rng), n(rng), n(rng));
+  while (v.norm() < 1e-6);
+  return v.normalized();
+}
+
+Eigen::Matrix3d random_rotation(std::mt19937_64& rng) {
+  std::normal_distribution<double> n(0.0, 1.0);
+  Eigen::Quaterniond q;
+  do q = Eigen::Quaterniond(n(rng), n(rng), n(rng), n(rng));
+  while (q.norm() < 1e-6);
+  return q.normalized().toRotationMatrix();
+}
+
+/// Per object, the fraction of its silhouette that is in front of the others (as synthesize_scene decides), and
+/// whether its projected bounding box stays inside the image by `margin` pixels.
+struct FrameCheck {
+  double min_visible = 1.0;
+  bool inside = true;
+};
+
+FrameCheck check_frame(Renderer& renderer, const Camera& cam, const std::vector<SceneObject>& objs, double margin) {
+  FrameCheck fc;
+  std::vector<RenderImage> imgs;
+  for (const SceneObject& o : objs) {
+    const Eigen::AlignedBox2d b = cam.project_bounds(o.mesh->bbox_corners(o.pose), 0.05);
+    if (b.isEmpty() || b.min().x() < margin - 0.5 || b.min().y() < margin - 0.5 ||
+        b.max().x() > cam.width - 0.5 - margin || b.max().y() > cam.height - 0.5 - margin)
+      fc.inside = false;
+    imgs.push_back(renderer.render(cam, *o.mesh, {o.pose})[0]);
+  }
+  for (size_t i = 0; i < objs.size(); ++i) {
+    int full = 0, visible = 0;
+    for (int y = 0; y < cam.height; ++y)
+      for (int x = 0; x < cam.width; ++x) {
+        if (imgs[i].coverage.at<float>(y, x) < 0.5f) continue;
+        ++full;
+        const float d = imgs[i].depth.at<float>(y, x);
+        bool front = true;
+        for (size_t j = 0; j < objs.size() && front; ++j) {
+          if (j == i || imgs[j].coverage.at<float>(y, x) < 0.5f) continue;
+          const float dj = imgs[j].depth.at<float>(y, x);
+          if (dj > 0.f && dj < d) front = false;
+        }
+        visible += front;
+      }
+    fc.min_visible = std::min(fc.min_visible, full > 0 ? double(visible) / full : 0.0);
+  }
+  return fc;
+}
+
+// ---- Messages ----
+
+geometry_msgs::Pose to_msg(const Pose& p) {
+  geometry_msgs::Pose m;
+  m.position.x = p.t.x();
+  m.position.y = p.t.y();
+  m.position.z = p.t.z();
+  const auto q = p.quaternion_xyzw();
+  m.orientation.x = q[0];
+  m.orientation.y = q[1];
+  m.orientation.z = q[2];
+  m.orientation.w = q[3];
+  return m;
+}
+
+std_msgs::Header header(const ros::Time& stamp, const std::string& frame, uint32_t seq) {
+  std_msgs::Header h;
+  h.stamp = stamp;
+  h.frame_id = frame;
+  h.seq = seq;
+  return h;
+}
+
+sensor_msgs::CameraInfo camera_info(const Camera& cam, const std_msgs::Header& h) {
+  sensor_msgs::CameraInfo ci;
+  ci.header = h;
+  ci.width = uint32_t(cam.width);
+  ci.height = uint32_t(cam.height);
+  ci.distortion_model = "plumb_bob";
+  ci.D.assign(5, 0.0);
+  ci.K = {cam.fx, 0, cam.cx, 0, cam.fy, cam.cy, 0, 0, 1};
+  ci.R = {1, 0, 0, 0, 1, 0, 0, 0, 1};
+  ci.P = {cam.fx, 0, cam.cx, 0, 0, cam.fy, cam.cy, 0, 0, 0, 1, 0};
+  return ci;
+}
+
+sensor_msgs::ImagePtr image_msg(const std_msgs::Header& h, const std::string& encoding, const cv::Mat& m) {
+  return cv_bridge::CvImage(h, encoding, m).toImageMsg();
+}
+
+/// Pose of camera_color_optical_frame in camera_link (REP 103/105: optical z forward = body x forward).
+Pose link_from_optical() { return Pose::from_quaternion(-0.5, 0.5, -0.5, 0.5, Eigen::Vector3d::Zero()); }
+
+template <class M>
+boost::shared_ptr<ros::M_string> latched_connection_header(const std::string& topic) {
+  auto h = boost::make_shared<ros::M_string>();
+  (*h)["callerid"] = "/diffdope_make_bag";
+  (*h)["topic"] = topic;
+  (*h)["type"] = ros::message_traits::datatype<M>();
+  (*h)["md5sum"] = ros::message_traits::md5sum<M>();
+  (*h)["message_definition"] = ros::message_traits::definition<M>();
+  (*h)["latching"] = "1";
+  return h;
+}
+
+std::string yaml_quote(const std::string& s) { return "'" + s + "'"; }
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  Args args;
+  try {
+    args = parse_args(argc, argv);
+  } catch (const UsageError& e) {
+    std::cerr << "diffdope_make_bag: " << e.what() << "\n";
+    usage(std::cerr);
+    return 2;
+  }
+
+  try {
+    // Sanity of the fixed optical -> link rotation: optical z (forward) is camera_link x, optical x (right) is -y.
+    {
+      const Pose T = link_from_optical();
+      if (!(T.R * Eigen::Vector3d::UnitZ()).isApprox(Eigen::Vector3d::UnitX(), 1e-12) ||
+          !(T.R * Eigen::Vector3d::UnitX()).isApprox(-Eigen::Vector3d::UnitY(), 1e-12))
+        throw std::logic_error("camera_link <- optical rotation is wrong");
+    }
+
+    const fs::path out_dir = fs::absolute(args.out);
+    std::error_code ec;
+    fs::create_directories(out_dir / "meshes", ec);
+    if (ec) throw std::runtime_error((out_dir / "meshes").string() + ": cannot create: " + ec.message());
+
+    // Objects, in the fixed order box, can, lblock.
+    std::vector<DemoObject> objects;
+    objects.push_back({"box", make_box(Eigen::Vector3d(0.10, 0.05, 0.14), make_label_texture(512, 11)), false, 1});
+    if (args.objects >= 2)
+      objects.push_back({"can", make_cylinder(0.035, 0.11, 64, make_label_texture(512, 12)), true, 2});
+    if (args.objects >= 3) objects.push_back({"lblock", make_l_block(0.12, make_label_texture(512, 13)), false, 3});
+    const size_t n = objects.size();
+
+    std::ostringstream yaml;
+    yaml << "# Written by diffdope_make_bag: the objects of demo.bag (meshes in metres, next to this file).\n"
+         << "refiner:\n  iterations: 40\n  batch_size: 16\nobjects:\n";
+    for (const DemoObject& o : objects) {
+      save_ply(o.mesh, (out_dir / "meshes" / (o.name + ".ply")).string(), 1.0);
+      yaml << "  - name: " << o.name << "\n    mesh: " << yaml_quote("meshes/" + o.name + ".ply")
+           << "\n    mesh_scale: 1\n    symmetric: " << (o.symmetric ? "true" : "false")
+           << "\n    mask_label: " << o.label << "\n";
+    }
+    const std::string yaml_path = (out_dir / "objects.yaml").string();
+    {
+      std::ofstream f(yaml_path);
+      f << yaml.str();
+      if (!f) throw std::runtime_error(yaml_path + ": cannot write");
+    }
+    // Read back what the nodelet will read: the config and the meshes, at the same size.
+    const ObjectsConfig cfg = load_objects_config(yaml_path);
+    for (size_t i = 0; i < n; ++i) {
+      const Mesh back = load_object_mesh(cfg.objects[i]);
+      if (std::abs(back.diameter() - objects[i].mesh.diameter()) > 1e-4)
+        throw std::runtime_error(cfg.objects[i].mesh_path + ": mesh reads back at a different size");
+    }
+
+    // Camera and scene layout.
+    const double f = 1.25 * args.width;
+    const Camera cam(f, f, args.width / 2.0 - 0.5, args.height / 2.0 - 0.5, args.width, args.height);
+    const double check_scale = std::min(1.0, 160.0 / args.width);
+    const Camera check_cam = cam.scaled(check_scale);
+    auto renderer = make_cpu_renderer();
+    std::mt19937_64 layout_rng(args.seed * 0x9E3779B97F4A7C15ull + 1);
+    std::uniform_real_distribution<double> U(-1.0, 1.0);
+    const double spacing = n == 3 ? 0.12 : 0.14;
+    const int check_frames = std::min(args.frames, 200);
+    std::vector<Motion> motions, best_motions;
+    double best_score = -1;
+    int attempts = 0;
+    for (; attempts < 200; ++attempts) {  // redraw until every object stays in view and mostly unoccluded
+      motions.clear();
+      for (size_t i = 0; i < n; ++i) {
+        Motion m;
+        m.R0 = random_rotation(layout_rng);
+        const double x = (double(i) - 0.5 * double(n - 1)) * spacing + 0.01 * U(layout_rng);
+        m.centre0 = Eigen::Vector3d(x, 0.02 * U(layout_rng), 0.60 + 0.05 * U(layout_rng));
+        m.axis = random_unit(layout_rng);
+        m.turn_rate = (15.0 + 3.0 * U(layout_rng)) * M_PI / 180.0;
+        m.direction = random_unit(layout_rng);
+        motions.push_back(m);
+      }
+      double score = 2.0;  // the worst frame: min visible fraction, minus 1 when something leaves the image
+      for (int s = 0; s < check_frames && score > best_score; ++s) {
+        const int k = check_frames == args.frames ? s : int(std::lround(double(s) * (args.frames - 1) / (check_frames - 1)));
+        std::vector<SceneObject> objs;
+        for (size_t i = 0; i < n; ++i)
+          objs.push_back({&objects[i].mesh, motions[i].at(k / args.rate, objects[i].mesh.center())});
+        const FrameCheck fc = check_frame(*renderer, check_cam, objs, 2.0);
+        score = std::min(score, fc.min_visible - (fc.inside ? 0.0 : 1.0));
+      }
+      if (score > best_score) best_score = score, best_motions = motions;
+      if (best_score >= 0.75) break;
+    }
+    motions = best_motions;
+    if (best_score < 0.7)
+      std::fprintf(stderr, "diffdope_make_bag: warning: no layout kept every object in view and >= 70 %% visible "
+                           "(best: %s, min visible %.2f); using it anyway\n",
+                   best_score < 0 ? "an object leaves the image" : "in view", best_score < 0 ? best_score + 1 : best_score);
+
+    // The bag.
+    const std::string bag_path = (out_dir / "demo.bag").string();
+    rosbag::Bag bag;
+    bag.open(bag_path, rosbag::bagmode::Write);
+    if (args.compression == "lz4") bag.setCompression(rosbag::compression::LZ4);
+    else if (args.compression == "bz2") bag.setCompression(rosbag::compression::BZ2);
+
+    const ros::Time t0(1000.0);
+    auto stamp_of = [&](int k) { return t0 + ros::Duration(double(k) / args.rate); };
+
+    // Static transform, latched, at the first stamp.
+    tf2_msgs::TFMessage tf;
+    {
+      geometry_msgs::TransformStamped ts;
+      ts.header = header(t0, kLinkFrame, 0);
+      ts.child_frame_id = kOpticalFrame;
+      const auto q = link_from_optical().quaternion_xyzw();
+      ts.transform.rotation.x = q[0];
+      ts.transform.rotation.y = q[1];
+      ts.transform.rotation.z = q[2];
+      ts.transform.rotation.w = q[3];
+      tf.transforms.push_back(ts);
+    }
+    bag.write("/tf_static", t0, tf, latched_connection_header<tf2_msgs::TFMessage>("/tf_static"));
+
+    struct Pending {
+      ros::Time write_time;
+      std::string topic;
+      geometry_msgs::PoseStamped msg;
+    };
+    std::deque<Pending> pending;  // detections waiting for their arrival time (constant latency: FIFO)
+    auto flush = [&](const ros::Time* until) {
+      while (!pending.empty() && (!until || pending.front().write_time <= *until)) {
+        bag.write(pending.front().topic, pending.front().write_time, pending.front().msg);
+        pending.pop_front();
+      }
+    };
+
+    std::mt19937_64 detector_rng(args.seed * 0xD1B54A32D192ED03ull + 7);
+    const uint32_t scene_seed = uint32_t(args.seed * 2654435761u + 17);  // one background for the whole bag
+    const Pose T_link_optical = link_from_optical();
+    const bool depth16 = args.depth_encoding == "16UC1";
+    int detections = 0;
+    double min_visible = 1.0;
+    for (int k = 0; k < args.frames; ++k) {
+      const ros::Time t = stamp_of(k);
+      flush(&t);
+      const double tau = double(k) / args.rate;
+      std::vector<SceneObject> objs;
+      std::vector<Pose> poses;
+      for (size_t i = 0; i < n; ++i) {
+        poses.push_back(motions[i].at(tau, objects[i].mesh.center()));
+        objs.push_back({&objects[i].mesh, poses.back()});
+      }
+      const SyntheticScene scene = synthesize_scene(*renderer, cam, objs, SyntheticNoise(), scene_seed);
+      for (double v : scene.visible_fraction) min_visible = std::min(min_visible, v);
+
+      const std_msgs::Header h = header(t, kOpticalFrame, uint32_t(k));
+      cv::Mat rgb8;
+      scene.rgb.convertTo(rgb8, CV_8UC3, 255.0);
+      bag.write("/camera/rgb/image_rect_color", t, image_msg(h, sensor_msgs::image_encodings::RGB8, rgb8));
+      bag.write("/camera/rgb/camera_info", t, camera_info(cam, h));
+      cv::Mat depth;
+      if (depth16) {
+        scene.depth.convertTo(depth, CV_16U, 1000.0);  // millimetres, rounded; 0 stays "no reading"
+        bag.write("/camera/depth/image_rect", t, image_msg(h, sensor_msgs::image_encodings::TYPE_16UC1, depth));
+      } else {
+        depth = scene.depth.clone();
+        depth.setTo(std::numeric_limits<float>::quiet_NaN(), scene.depth <= 0.f);  // REP 118: NaN = no reading
+        bag.write("/camera/depth/image_rect", t, image_msg(h, sensor_msgs::image_encodings::TYPE_32FC1, depth));
+      }
+      cv::Mat labels = cv::Mat::zeros(cam.height, cam.width, CV_8U);
+      for (size_t i = 0; i < n; ++i) labels.setTo(objects[i].label, scene.visible_masks[i] >= 0.5f);
+      bag.write("/camera/mask", t, image_msg(h, sensor_msgs::image_encodings::MONO8, labels));
+
+      diffdope_ros::InitialPoseArray gt;
+      gt.header = h;
+      for (size_t i = 0; i < n; ++i) {
+        diffdope_ros::InitialPose p;
+        p.name = objects[i].name;
+        p.pose.header = h;
+        p.pose.pose = to_msg(poses[i]);
+        gt.poses.push_back(p);
+      }
+      bag.write("/ground_truth", t, gt);
+
+      if (k % args.detector_every == 0) {
+        for (size_t i = 0; i < n; ++i) {
+          const Pose noisy = perturb_pose(poses[i], objects[i].mesh.center(), args.rot_noise_deg * M_PI / 180.0,
+                                          args.trans_noise_m, detector_rng);
+          Pending d;
+          d.write_time = t + ros::Duration(args.detector_latency);
+          d.topic = "/dope/pose_" + objects[i].name;
+          d.msg.header = header(t, kLinkFrame, uint32_t(k / args.detector_every));
+          d.msg.pose = to_msg(T_link_optical * noisy);
+          pending.push_back(d);
+          ++detections;
+        }
+      }
+    }
+    flush(nullptr);
+    bag.close();
+
+    const auto size = fs::file_size(bag_path);
+    std::fprintf(stderr,
+                 "diffdope_make_bag: %s: %d frames at %g Hz, %zu objects, %d detections, %s depth, min visible "
+                 "%.2f, %.1f MB\n",
+                 bag_path.c_str(), args.frames, args.rate, n, detections, args.depth_encoding.c_str(), min_visible,
+                 double(size) / (1024.0 * 1024.0));
+  } catch (const rosbag::BagException& e) {
+    std::cerr << "diffdope_make_bag: bag: " << e.what() << "\n";
+    return 1;
+  } catch (const std::exception& e) {
+    std::cerr << "diffdope_make_bag: " << e.what() << "\n";
+    return 1;
+  }
+  return 0;
+}

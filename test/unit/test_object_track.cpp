@@ -1,0 +1,228 @@
+// ObjectTrack (object_track.hpp): which initial pose seeds an object's refinement on each frame.
+#include <gtest/gtest.h>
+
+#include <optional>
+
+#include "diffdope/object_track.hpp"
+
+using namespace diffdope;
+
+namespace {
+
+Pose at(double x) { return Pose(Eigen::Matrix3d::Identity(), Eigen::Vector3d(x, 0, 0.6)); }
+
+TrackOptions options(bool tracking = true) {
+  TrackOptions o;
+  o.tracking = tracking;
+  o.max_detection_age = 1.0;
+  o.track_timeout = 3.0;
+  o.max_failures = 2;
+  return o;
+}
+
+void expect_seed(const std::optional<Seed>& s, SeedSource source, double x, double stamp) {
+  ASSERT_TRUE(s.has_value());
+  EXPECT_EQ(s->source, source) << to_string(s->source);
+  EXPECT_DOUBLE_EQ(s->pose.t.x(), x);
+  EXPECT_DOUBLE_EQ(s->stamp, stamp);
+}
+
+}  // namespace
+
+TEST(ObjectTrack, SourceNames) {
+  EXPECT_STREQ(to_string(SeedSource::kDetector), "detector");
+  EXPECT_STREQ(to_string(SeedSource::kTrack), "track");
+  EXPECT_STREQ(to_string(SeedSource::kRequest), "request");
+}
+
+TEST(ObjectTrack, NothingBeforeAnyDetection) {
+  ObjectTrack t(options());
+  EXPECT_FALSE(t.has_fresh_detection(10.0));
+  EXPECT_FALSE(t.peek(10.0).has_value());
+  EXPECT_FALSE(t.seed_for(10.0).has_value());
+  EXPECT_FALSE(t.tracking());
+}
+
+TEST(ObjectTrack, FreshDetectionSeedsOnce) {
+  ObjectTrack t(options(false));
+  t.add_detection(at(0.1), 10.0);
+  EXPECT_TRUE(t.has_fresh_detection(10.2));
+  expect_seed(t.seed_for(10.2), SeedSource::kDetector, 0.1, 10.0);
+  // Consumed: the next frame gets nothing from it.
+  EXPECT_FALSE(t.has_fresh_detection(10.3));
+  EXPECT_FALSE(t.seed_for(10.3).has_value());
+}
+
+TEST(ObjectTrack, DetectionAgeLimitBothWays) {
+  ObjectTrack t(options());
+  t.add_detection(at(0.1), 10.0);
+  EXPECT_TRUE(t.has_fresh_detection(11.0));   // exactly max_detection_age
+  EXPECT_TRUE(t.has_fresh_detection(9.0));    // an image older than the detection, within the age
+  EXPECT_FALSE(t.has_fresh_detection(11.01)); // stale
+  EXPECT_FALSE(t.has_fresh_detection(8.99));
+  EXPECT_FALSE(t.seed_for(11.5).has_value());
+  // A stale detection is ignored, not consumed: an image closer to its stamp may still use it.
+  expect_seed(t.seed_for(10.5), SeedSource::kDetector, 0.1, 10.0);
+}
+
+TEST(ObjectTrack, PeekDoesNotConsume) {
+  ObjectTrack t(options());
+  t.add_detection(at(0.1), 10.0);
+  expect_seed(t.peek(10.1), SeedSource::kDetector, 0.1, 10.0);
+  expect_seed(t.peek(10.1), SeedSource::kDetector, 0.1, 10.0);
+  EXPECT_TRUE(t.has_fresh_detection(10.1));
+  expect_seed(t.seed_for(10.1), SeedSource::kDetector, 0.1, 10.0);
+  EXPECT_FALSE(t.peek(10.1).has_value());
+  // Peeking a track does not change it either.
+  t.report(at(0.2), true, 10.1);
+  expect_seed(t.peek(10.2), SeedSource::kTrack, 0.2, 10.1);
+  expect_seed(t.peek(10.2), SeedSource::kTrack, 0.2, 10.1);
+  EXPECT_TRUE(t.tracking());
+}
+
+TEST(ObjectTrack, TrackSeedsAfterPlausibleReport) {
+  ObjectTrack t(options());
+  t.add_detection(at(0.1), 10.0);
+  expect_seed(t.seed_for(10.0), SeedSource::kDetector, 0.1, 10.0);
+  EXPECT_FALSE(t.report(at(0.15), true, 10.0));
+  EXPECT_TRUE(t.tracking());
+  expect_seed(t.seed_for(10.1), SeedSource::kTrack, 0.15, 10.0);
+  // The track is not consumed: every frame uses the latest plausible pose.
+  EXPECT_FALSE(t.report(at(0.16), true, 10.1));
+  expect_seed(t.seed_for(10.2), SeedSource::kTrack, 0.16, 10.1);
+  expect_seed(t.seed_for(10.2), SeedSource::kTrack, 0.16, 10.1);
+}
+
+TEST(ObjectTrack, NoTrackAfterImplausibleReport) {
+  ObjectTrack t(options());
+  t.add_detection(at(0.1), 10.0);
+  ASSERT_TRUE(t.seed_for(10.0).has_value());
+  EXPECT_FALSE(t.report(at(0.5), false, 10.0));  // no track to lose yet
+  EXPECT_FALSE(t.tracking());
+  EXPECT_EQ(t.failures(), 1);
+  EXPECT_FALSE(t.seed_for(10.1).has_value());
+}
+
+TEST(ObjectTrack, FreshDetectionBeatsTrack) {
+  ObjectTrack t(options());
+  t.add_detection(at(0.1), 10.0);
+  ASSERT_TRUE(t.seed_for(10.0).has_value());
+  t.report(at(0.15), true, 10.0);
+  t.add_detection(at(0.3), 10.05);  // a detection of an earlier image, arriving late
+  expect_seed(t.seed_for(10.2), SeedSource::kDetector, 0.3, 10.05);
+  t.report(at(0.31), true, 10.2);
+  expect_seed(t.seed_for(10.3), SeedSource::kTrack, 0.31, 10.2);
+}
+
+TEST(ObjectTrack, TrackTimesOut) {
+  ObjectTrack t(options());
+  t.add_detection(at(0.1), 10.0);
+  ASSERT_TRUE(t.seed_for(10.0).has_value());
+  t.report(at(0.15), true, 10.0);
+  expect_seed(t.seed_for(13.0), SeedSource::kTrack, 0.15, 10.0);  // exactly track_timeout
+  EXPECT_FALSE(t.seed_for(13.01).has_value());
+  // A frame much older than the track does not use it either.
+  EXPECT_FALSE(t.seed_for(8.9).has_value());
+  expect_seed(t.seed_for(9.5), SeedSource::kTrack, 0.15, 10.0);
+}
+
+TEST(ObjectTrack, ConsecutiveFailuresLoseTheTrack) {
+  ObjectTrack t(options());
+  t.add_detection(at(0.1), 10.0);
+  ASSERT_TRUE(t.seed_for(10.0).has_value());
+  EXPECT_FALSE(t.report(at(0.1), true, 10.0));
+  EXPECT_EQ(t.failures(), 0);
+
+  EXPECT_FALSE(t.report(at(0.9), false, 10.1));  // one failure: the track still seeds
+  EXPECT_EQ(t.failures(), 1);
+  EXPECT_TRUE(t.tracking());
+  expect_seed(t.seed_for(10.2), SeedSource::kTrack, 0.1, 10.0);  // the last plausible pose, not the failed one
+
+  EXPECT_TRUE(t.report(at(0.9), false, 10.2));  // max_failures in a row: lost
+  EXPECT_FALSE(t.tracking());
+  EXPECT_FALSE(t.seed_for(10.3).has_value());
+  EXPECT_FALSE(t.report(at(0.9), false, 10.3));  // nothing left to lose
+}
+
+TEST(ObjectTrack, PlausibleReportResetsFailureCount) {
+  ObjectTrack t(options());
+  t.add_detection(at(0.1), 10.0);
+  ASSERT_TRUE(t.seed_for(10.0).has_value());
+  t.report(at(0.1), true, 10.0);
+  EXPECT_FALSE(t.report(at(0.9), false, 10.1));
+  EXPECT_EQ(t.failures(), 1);
+  EXPECT_FALSE(t.report(at(0.11), true, 10.2));
+  EXPECT_EQ(t.failures(), 0);
+  EXPECT_FALSE(t.report(at(0.9), false, 10.3));  // 1 again, not 2
+  EXPECT_TRUE(t.tracking());
+  expect_seed(t.seed_for(10.4), SeedSource::kTrack, 0.11, 10.2);
+  EXPECT_TRUE(t.report(at(0.9), false, 10.4));
+  EXPECT_FALSE(t.tracking());
+}
+
+TEST(ObjectTrack, MaxFailuresOne) {
+  TrackOptions o = options();
+  o.max_failures = 1;
+  ObjectTrack t(o);
+  t.add_detection(at(0.1), 10.0);
+  ASSERT_TRUE(t.seed_for(10.0).has_value());
+  t.report(at(0.1), true, 10.0);
+  EXPECT_TRUE(t.report(at(0.9), false, 10.1));
+  EXPECT_FALSE(t.tracking());
+}
+
+TEST(ObjectTrack, DetectionAfterLostTrackStartsAgain) {
+  ObjectTrack t(options());
+  t.add_detection(at(0.1), 10.0);
+  ASSERT_TRUE(t.seed_for(10.0).has_value());
+  t.report(at(0.1), true, 10.0);
+  t.report(at(0.9), false, 10.1);
+  ASSERT_TRUE(t.report(at(0.9), false, 10.2));
+  t.add_detection(at(0.2), 10.3);
+  expect_seed(t.seed_for(10.3), SeedSource::kDetector, 0.2, 10.3);
+  EXPECT_FALSE(t.report(at(0.21), true, 10.3));
+  EXPECT_EQ(t.failures(), 0);
+  expect_seed(t.seed_for(10.4), SeedSource::kTrack, 0.21, 10.3);
+}
+
+TEST(ObjectTrack, TrackingOffNeverSeedsFromTrack) {
+  ObjectTrack t(options(false));
+  t.add_detection(at(0.1), 10.0);
+  expect_seed(t.seed_for(10.0), SeedSource::kDetector, 0.1, 10.0);
+  EXPECT_FALSE(t.report(at(0.15), true, 10.0));
+  EXPECT_FALSE(t.tracking());
+  EXPECT_FALSE(t.peek(10.1).has_value());
+  EXPECT_FALSE(t.seed_for(10.1).has_value());
+  // Detections still seed every time one arrives.
+  t.add_detection(at(0.2), 10.3);
+  expect_seed(t.seed_for(10.3), SeedSource::kDetector, 0.2, 10.3);
+  // Failures never report a lost track (there is none).
+  EXPECT_FALSE(t.report(at(0.9), false, 10.3));
+  EXPECT_FALSE(t.report(at(0.9), false, 10.4));
+  EXPECT_FALSE(t.report(at(0.9), false, 10.5));
+}
+
+TEST(ObjectTrack, LateOlderDetectionDoesNotReplaceNewer) {
+  ObjectTrack t(options());
+  t.add_detection(at(0.2), 10.3);
+  t.add_detection(at(0.1), 10.0);  // older, arriving after the newer one
+  expect_seed(t.peek(10.3), SeedSource::kDetector, 0.2, 10.3);
+  // A newer detection does replace an unused older one.
+  t.add_detection(at(0.4), 10.6);
+  expect_seed(t.seed_for(10.6), SeedSource::kDetector, 0.4, 10.6);
+  EXPECT_FALSE(t.has_fresh_detection(10.6));
+}
+
+TEST(ObjectTrack, ResetForgetsEverything) {
+  ObjectTrack t(options());
+  t.add_detection(at(0.1), 10.0);
+  ASSERT_TRUE(t.seed_for(10.0).has_value());
+  t.report(at(0.1), true, 10.0);
+  t.report(at(0.9), false, 10.1);
+  t.add_detection(at(0.2), 10.2);
+  t.reset();
+  EXPECT_FALSE(t.tracking());
+  EXPECT_EQ(t.failures(), 0);
+  EXPECT_FALSE(t.has_fresh_detection(10.2));
+  EXPECT_FALSE(t.seed_for(10.2).has_value());
+}
