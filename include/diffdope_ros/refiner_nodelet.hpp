@@ -68,6 +68,7 @@ class RefinerNodelet : public nodelet::Nodelet {
     std::optional<geometry_msgs::PoseStamped> pending_detection;  // raw detector message, any frame
     ros::Subscriber detection_sub;
     ros::Publisher pose_pub;
+    ros::Time last_tf_stamp;  // tf2 rejects a second transform at the same stamp (service on the same frame)
   };
 
   /// A unit of worker work: the next streaming frame, or a service request waiting for its response.

@@ -51,7 +51,12 @@ std::string trim(const std::string& s) {
 // not, assimp's material is a generated white one that must not override MeshLoadOptions::default_color), and the
 // face count (to report "no triangles" instead of assimp's obscure message for vertex-only files).
 struct PlyHeader {
-  bool valid = false;
+  bool is_ply = false;  // first line is "ply"
+  bool valid = false;   // end_header found
+  std::string format;   // ascii / binary_little_endian / binary_big_endian
+  long long num_vertices = 0;
+  long long data_lines = 0;     // ascii: non-empty lines after the header
+  long long data_bytes = 0;     // bytes after the header
   std::string texture_file;
   bool has_material_element = false;
   long long num_faces = -1;  // -1: no face element
@@ -63,6 +68,7 @@ PlyHeader read_ply_header(const std::string& path) {
   if (!in) return h;
   std::string line;
   if (!std::getline(in, line) || lower(trim(line)) != "ply") return h;
+  h.is_ply = true;
   // Text lines up to end_header (also for binary PLYs); bounded so that a corrupt file cannot make us read forever.
   for (int n = 0; n < 100000 && std::getline(in, line); ++n) {
     line = trim(line);
@@ -73,6 +79,7 @@ PlyHeader read_ply_header(const std::string& path) {
       h.valid = true;
       break;
     }
+    if (kw == "format") ss >> h.format;
     if (kw == "comment" || kw == "obj_info") {
       std::string tag;
       ss >> tag;
@@ -87,7 +94,18 @@ PlyHeader read_ply_header(const std::string& path) {
       ss >> name >> count;
       if (name == "material") h.has_material_element = true;
       if (name == "face" || name == "tristrips") h.num_faces = std::max(h.num_faces, 0LL) + count;
+      if (name == "vertex") h.num_vertices = count;
     }
+  }
+  if (!h.valid) return h;
+  // What follows the header, to catch truncated files before assimp (which can spin on them).
+  const std::streampos body = in.tellg();
+  in.seekg(0, std::ios::end);
+  h.data_bytes = static_cast<long long>(in.tellg() - body);
+  if (h.format == "ascii") {
+    in.seekg(body);
+    while (std::getline(in, line))
+      if (!trim(line).empty()) ++h.data_lines;
   }
   return h;
 }
@@ -251,7 +269,19 @@ Mesh Mesh::load(const std::string& path, const MeshLoadOptions& options) {
   }
   const bool is_ply = lower(fs::path(path).extension().string()) == ".ply";
   PlyHeader ply;
-  if (is_ply) ply = read_ply_header(path);
+  if (is_ply) {
+    ply = read_ply_header(path);
+    if (!ply.is_ply) fail(path, "not a PLY file (the first line is not 'ply')");
+    if (!ply.valid) fail(path, "corrupt PLY header (no 'end_header' line)");
+    if (ply.format != "ascii" && ply.format != "binary_little_endian" && ply.format != "binary_big_endian")
+      fail(path, "corrupt PLY header (format '" + ply.format + "')");
+    const long long faces = std::max(ply.num_faces, 0LL);
+    if (ply.num_vertices < 0 || faces < 0) fail(path, "corrupt PLY header (negative element count)");
+    if (ply.format == "ascii" ? ply.data_lines < ply.num_vertices + faces
+                              : ply.data_bytes < 12 * ply.num_vertices + 4 * faces)
+      fail(path, "truncated PLY: the header declares " + std::to_string(ply.num_vertices) + " vertices and " +
+                     std::to_string(faces) + " faces, the file is shorter");
+  }
 
   Assimp::Importer importer;
   const unsigned flags = aiProcess_Triangulate | aiProcess_PreTransformVertices | aiProcess_JoinIdenticalVertices |

@@ -257,7 +257,8 @@ void RefinerNodelet::onImages(const sensor_msgs::ImageConstPtr& rgb, const senso
       frame->labels = labels_from_image(*mask);
     }
   } catch (const std::exception& e) {
-    errors_.error("input", std::string("input frame dropped: ") + e.what());
+    const std::string what = e.what();  // "<input> image: problem": throttle per input, not one for all
+    errors_.error("input/" + what.substr(0, what.find(':')), "input frame dropped: " + what);
     return;
   }
   {
@@ -624,6 +625,8 @@ std::vector<diffdope_ros::RefinedPose> RefinerNodelet::refineAndPublish(
     out.push_back(p);
     if (!r.plausible && !publish_implausible_) continue;  // scores still go out in ~refined_poses
     s.pose_pub.publish(p.pose);
+    if (s.last_tf_stamp == frame.header.stamp) continue;  // already on TF for this image: listeners keep the first
+    s.last_tf_stamp = frame.header.stamp;
     geometry_msgs::TransformStamped t;
     t.header = frame.header;
     t.child_frame_id = frame_prefix_ + s.config.name;

@@ -599,6 +599,20 @@ TEST_F(MeshIoTest, ErrorCorruptFile) {
   trunc.insert(trunc.end(), junk.begin(), junk.begin() + 100);
   write_bytes("trunc.ply", trunc);
   EXPECT_THROW(Mesh::load(file("trunc.ply")), std::runtime_error);
+  // A header without end_header (assimp 5.2 spins on this one: it must be refused before assimp sees it).
+  write_text("noend.ply", "ply\nformat ascii 1.0\nelement vertex 3\nthis is not a mesh\n");
+  std::string msg = load_error(file("noend.ply"));
+  EXPECT_NE(msg.find("end_header"), std::string::npos) << msg;
+  // ASCII data shorter than the header declares.
+  write_text("short.ply",
+             "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
+             "element face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n");
+  msg = load_error(file("short.ply"));
+  EXPECT_NE(msg.find("truncated"), std::string::npos) << msg;
+  // Not a PLY at all despite the extension.
+  write_text("text.ply", "hello\n");
+  msg = load_error(file("text.ply"));
+  EXPECT_NE(msg.find("not a PLY"), std::string::npos) << msg;
   // An empty file.
   write_bytes("empty.obj", {});
   EXPECT_THROW(Mesh::load(file("empty.obj")), std::runtime_error);

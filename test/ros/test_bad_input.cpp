@@ -1,0 +1,294 @@
+// rostest (bad_input.test): every kind of bad input gets a clear error on /rosout (and diagnostics), nothing
+// wrong is published, and the node still refines a good frame afterwards.
+#include <diagnostic_msgs/DiagnosticArray.h>
+#include <geometry_msgs/PoseStamped.h>
+#include <gtest/gtest.h>
+#include <ros/ros.h>
+#include <rosbag/bag.h>
+#include <rosbag/view.h>
+#include <rosgraph_msgs/Log.h>
+#include <sensor_msgs/CameraInfo.h>
+#include <sensor_msgs/Image.h>
+
+#include <mutex>
+
+#include "diffdope_ros/InitialPoseArray.h"
+#include "diffdope_ros/Refine.h"
+#include "diffdope_ros/RefinedPoseArray.h"
+#include "diffdope_ros/conversions.hpp"
+#include "diffdope_ros/pose_checker.hpp"
+
+namespace {
+
+struct Node {
+  ros::NodeHandle nh;
+  ros::Publisher rgb, info, depth, mask, det_box, initial_poses;
+  ros::Subscriber rosout, diag, refined_box, refined_all;
+  std::mutex mutex;
+  std::vector<std::string> errors;
+  std::string diagnostics_text;
+  int refined_box_count = 0, refined_arrays = 0;
+  geometry_msgs::PoseStamped last_refined_box;
+
+  // One good frame from the bag.
+  sensor_msgs::Image good_rgb, good_depth, good_mask;
+  sensor_msgs::CameraInfo good_info;
+  diffdope::Pose truth_box;
+
+  void onLog(const rosgraph_msgs::LogConstPtr& m) {
+    if (m->level < rosgraph_msgs::Log::ERROR) return;
+    std::lock_guard<std::mutex> l(mutex);
+    errors.push_back(m->msg);
+  }
+  void onDiag(const diagnostic_msgs::DiagnosticArrayConstPtr& m) {
+    std::string text;
+    for (const auto& s : m->status) {
+      if (s.name.find("refiner") == std::string::npos) continue;
+      text += s.message + "\n";
+      for (const auto& kv : s.values) text += kv.key + ": " + kv.value + "\n";
+    }
+    std::lock_guard<std::mutex> l(mutex);
+    if (!text.empty()) diagnostics_text = text;
+  }
+  void onRefinedBox(const geometry_msgs::PoseStampedConstPtr& m) {
+    std::lock_guard<std::mutex> l(mutex);
+    ++refined_box_count;
+    last_refined_box = *m;
+  }
+  void onRefinedAll(const diffdope_ros::RefinedPoseArrayConstPtr&) {
+    std::lock_guard<std::mutex> l(mutex);
+    ++refined_arrays;
+  }
+
+  /// Waits until an error containing `needle` was logged (after `from` errors).
+  bool waitForError(const std::string& needle, double timeout = 8.0) {
+    const ros::WallTime start = ros::WallTime::now();
+    while ((ros::WallTime::now() - start).toSec() < timeout) {
+      {
+        std::lock_guard<std::mutex> l(mutex);
+        for (const auto& e : errors)
+          if (e.find(needle) != std::string::npos) return true;
+      }
+      ros::WallDuration(0.05).sleep();
+    }
+    std::lock_guard<std::mutex> l(mutex);
+    std::string all;
+    for (const auto& e : errors) all += "\n  " + e;
+    ADD_FAILURE() << "no error containing '" << needle << "'; errors so far:" << all;
+    return false;
+  }
+
+  void publishSet(sensor_msgs::Image r, sensor_msgs::CameraInfo i, sensor_msgs::Image d, sensor_msgs::Image m,
+                  bool with_depth_and_mask = true) {
+    const ros::Time now = ros::Time::now();
+    r.header.stamp = i.header.stamp = d.header.stamp = m.header.stamp = now;
+    rgb.publish(r);
+    info.publish(i);
+    if (with_depth_and_mask) {
+      depth.publish(d);
+      mask.publish(m);
+    }
+  }
+  void publishGood() { publishSet(good_rgb, good_info, good_depth, good_mask); }
+  geometry_msgs::PoseStamped detection(const diffdope::Pose& p, const std::string& frame) {
+    geometry_msgs::PoseStamped d;
+    d.header.stamp = ros::Time::now();
+    d.header.frame_id = frame;
+    d.pose = diffdope_ros::pose_to_msg(p);
+    return d;
+  }
+};
+Node* node = nullptr;
+
+TEST(BadInput, BrokenMeshesDisableOnlyTheirObjects) {
+  // Start-up errors may predate this test's /rosout subscription: diagnostics keep them.
+  const ros::WallTime start = ros::WallTime::now();
+  std::string text;
+  while ((ros::WallTime::now() - start).toSec() < 15) {
+    {
+      std::lock_guard<std::mutex> l(node->mutex);
+      text = node->diagnostics_text;
+    }
+    if (text.find("object ghost") != std::string::npos) break;
+    ros::WallDuration(0.2).sleep();
+  }
+  EXPECT_NE(text.find("objects enabled: 1 of 3"), std::string::npos) << text;
+  EXPECT_NE(text.find("object ghost: disabled"), std::string::npos) << text;
+  EXPECT_NE(text.find("does_not_exist.ply"), std::string::npos) << text;
+  EXPECT_NE(text.find("object broken: disabled"), std::string::npos) << text;
+  diffdope_ros::Refine srv;
+  srv.request.object_names = {"ghost"};
+  ASSERT_TRUE(ros::service::call("/diffdope_refiner/refine", srv));
+  EXPECT_FALSE(srv.response.success);
+  EXPECT_NE(srv.response.message.find("disabled"), std::string::npos) << srv.response.message;
+}
+
+TEST(BadInput, EachBadMessageIsReported) {
+  Node& n = *node;
+  auto rgb = n.good_rgb;
+  rgb.encoding = "32FC1";
+  n.publishSet(rgb, n.good_info, n.good_depth, n.good_mask);
+  n.waitForError("rgb image: unsupported encoding '32FC1'");
+
+  auto depth = n.good_depth;
+  depth.encoding = "rgb8";
+  n.publishSet(n.good_rgb, n.good_info, depth, n.good_mask);
+  n.waitForError("depth image: unsupported encoding 'rgb8'");
+
+  auto mask = n.good_mask;
+  mask.encoding = "bgr8";
+  n.publishSet(n.good_rgb, n.good_info, n.good_depth, mask);
+  n.waitForError("mask image: unsupported encoding 'bgr8'");
+
+  depth = n.good_depth;  // half size: not registered to the rgb camera
+  depth.width /= 2;
+  depth.height /= 2;
+  depth.step /= 2;
+  depth.data.resize(size_t(depth.step) * depth.height);
+  n.publishSet(n.good_rgb, n.good_info, depth, n.good_mask);
+  n.waitForError("register it to the rgb camera");
+
+  auto info = n.good_info;
+  info.K.fill(0.0);
+  info.P.fill(0.0);
+  n.publishSet(n.good_rgb, info, n.good_depth, n.good_mask);
+  n.waitForError("camera_info: focal length is zero");
+
+  rgb = n.good_rgb;
+  rgb.data.resize(rgb.data.size() / 2);
+  n.publishSet(rgb, n.good_info, n.good_depth, n.good_mask);
+  n.waitForError("does not match step");
+
+  auto nan_pose = n.detection(n.truth_box, "camera_color_optical_frame");
+  nan_pose.pose.orientation.w = std::numeric_limits<double>::quiet_NaN();
+  n.det_box.publish(nan_pose);
+  n.waitForError("NaN");
+
+  diffdope::Pose behind = n.truth_box;
+  behind.t.z() = -0.5;
+  n.det_box.publish(n.detection(behind, "camera_color_optical_frame"));
+  ros::WallDuration(0.3).sleep();
+  n.publishGood();
+  n.waitForError("behind the camera");
+
+  n.det_box.publish(n.detection(n.truth_box, "nowhere"));
+  ros::WallDuration(0.3).sleep();
+  n.publishGood();
+  n.waitForError("no transform from 'nowhere'");
+
+  diffdope_ros::InitialPoseArray unknown;
+  diffdope_ros::InitialPose ip;
+  ip.name = "teapot";
+  ip.pose = n.detection(n.truth_box, "camera_color_optical_frame");
+  unknown.poses.push_back(ip);
+  n.initial_poses.publish(unknown);
+  n.waitForError("unknown object name 'teapot'");
+
+  // Depth and mask stop: rgb + camera_info alone never form a synchronized set.
+  for (int i = 0; i < 15; ++i) {
+    n.publishSet(n.good_rgb, n.good_info, n.good_depth, n.good_mask, false);
+    ros::WallDuration(0.2).sleep();
+  }
+  n.waitForError("no synchronized input");
+
+  diffdope_ros::Refine srv;
+  srv.request.object_names = {"teapot"};
+  ASSERT_TRUE(ros::service::call("/diffdope_refiner/refine", srv));
+  EXPECT_FALSE(srv.response.success);
+  EXPECT_NE(srv.response.message.find("teapot"), std::string::npos);
+
+  // Nothing was refined from any of that.
+  std::lock_guard<std::mutex> l(n.mutex);
+  EXPECT_EQ(n.refined_box_count, 0);
+  EXPECT_EQ(n.refined_arrays, 0);
+}
+
+TEST(BadInput, StillRefinesAGoodFrameAfterwards) {
+  Node& n = *node;
+  const diffdope::Pose init =
+      diffdope::Pose(Eigen::AngleAxisd(3.0 * M_PI / 180, Eigen::Vector3d::UnitX()).toRotationMatrix(),
+                     Eigen::Vector3d(0.006, 0, 0)) * n.truth_box;
+  const ros::WallTime start = ros::WallTime::now();
+  while ((ros::WallTime::now() - start).toSec() < 40) {
+    n.det_box.publish(n.detection(init, "camera_color_optical_frame"));
+    ros::WallDuration(0.2).sleep();
+    n.publishGood();
+    ros::WallDuration(1.0).sleep();
+    std::lock_guard<std::mutex> l(n.mutex);
+    if (n.refined_box_count > 0) break;
+  }
+  std::lock_guard<std::mutex> l(n.mutex);
+  ASSERT_GT(n.refined_box_count, 0) << "no refined pose for a good frame after the bad input";
+  const auto err = diffdope_ros::pose_error(diffdope_ros::pose_from_msg(n.last_refined_box.pose, "refined"),
+                                            n.truth_box, false);
+  EXPECT_LT(err.translation_m, 0.005);
+  EXPECT_LT(err.rotation_rad, 2.0 * M_PI / 180);
+}
+
+bool loadGoodFrame(Node& n, const std::string& bag_path) {
+  rosbag::Bag bag(bag_path, rosbag::bagmode::Read);
+  bool have[5] = {false, false, false, false, false};
+  rosbag::View view(bag);
+  for (rosbag::View::iterator it = view.begin(); it != view.end(); ++it) {
+    const rosbag::MessageInstance& m = *it;
+    const std::string t = m.getTopic();
+    if (t == "/camera/rgb/image_rect_color" && !have[0]) {
+      n.good_rgb = *m.instantiate<sensor_msgs::Image>();
+      have[0] = true;
+    }
+    if (t == "/camera/depth/image_rect" && !have[1]) {
+      n.good_depth = *m.instantiate<sensor_msgs::Image>();
+      have[1] = true;
+    }
+    if (t == "/camera/mask" && !have[2]) {
+      n.good_mask = *m.instantiate<sensor_msgs::Image>();
+      have[2] = true;
+    }
+    if (t == "/camera/rgb/camera_info" && !have[3]) {
+      n.good_info = *m.instantiate<sensor_msgs::CameraInfo>();
+      have[3] = true;
+    }
+    if (t == "/ground_truth" && !have[4]) {
+      const auto truth = m.instantiate<diffdope_ros::InitialPoseArray>();  // keep it alive over the loop
+      for (const auto& p : truth->poses)
+        if (p.name == "box") n.truth_box = diffdope_ros::pose_from_msg(p.pose.pose, "truth"), have[4] = true;
+    }
+  }
+  return have[0] && have[1] && have[2] && have[3] && have[4];
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  testing::InitGoogleTest(&argc, argv);
+  ros::init(argc, argv, "test_bad_input");
+  ros::NodeHandle pnh("~");
+  Node n;
+  node = &n;
+  if (!loadGoodFrame(n, pnh.param<std::string>("bag", ""))) {
+    std::fprintf(stderr, "cannot read a frame from the bag\n");
+    return 1;
+  }
+  n.rgb = n.nh.advertise<sensor_msgs::Image>("/camera/rgb/image_rect_color", 5);
+  n.info = n.nh.advertise<sensor_msgs::CameraInfo>("/camera/rgb/camera_info", 5);
+  n.depth = n.nh.advertise<sensor_msgs::Image>("/camera/depth/image_rect", 5);
+  n.mask = n.nh.advertise<sensor_msgs::Image>("/camera/mask", 5);
+  n.det_box = n.nh.advertise<geometry_msgs::PoseStamped>("/dope/pose_box", 5);
+  n.initial_poses = n.nh.advertise<diffdope_ros::InitialPoseArray>("/diffdope_refiner/initial_poses", 5);
+  n.rosout = n.nh.subscribe("/rosout", 1000, &Node::onLog, &n);
+  n.diag = n.nh.subscribe("/diagnostics", 10, &Node::onDiag, &n);
+  n.refined_box = n.nh.subscribe("/diffdope_refiner/refined/box", 10, &Node::onRefinedBox, &n);
+  n.refined_all = n.nh.subscribe("/diffdope_refiner/refined_poses", 10, &Node::onRefinedAll, &n);
+  ros::AsyncSpinner spinner(2);
+  spinner.start();
+  if (!ros::service::waitForService("/diffdope_refiner/refine", ros::Duration(60))) return 1;
+  // Every publisher connected before the first message (a message before the connection is lost).
+  const ros::WallTime start = ros::WallTime::now();
+  while ((n.rgb.getNumSubscribers() == 0 || n.info.getNumSubscribers() == 0 || n.depth.getNumSubscribers() == 0 ||
+          n.mask.getNumSubscribers() == 0 || n.det_box.getNumSubscribers() == 0 ||
+          n.initial_poses.getNumSubscribers() == 0) &&
+         (ros::WallTime::now() - start).toSec() < 30)
+    ros::WallDuration(0.1).sleep();
+  ros::WallDuration(0.5).sleep();
+  return RUN_ALL_TESTS();
+}

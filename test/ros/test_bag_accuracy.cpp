@@ -1,0 +1,125 @@
+// rostest (bag_accuracy.test): the refiner on the generated bag, judged against the bag's ground truth.
+#include <geometry_msgs/PoseStamped.h>
+#include <gtest/gtest.h>
+#include <ros/ros.h>
+#include <tf2_ros/buffer.h>
+#include <tf2_ros/transform_listener.h>
+
+#include <mutex>
+
+#include "diffdope/object_config.hpp"
+#include "diffdope_ros/conversions.hpp"
+#include "diffdope_ros/pose_checker.hpp"
+
+namespace {
+
+struct Recorder {
+  std::mutex mutex;
+  std::unique_ptr<diffdope_ros::PoseChecker> checker;
+  std::vector<diffdope_ros::RefinedPoseArray> arrays;
+  std::map<std::string, std::vector<geometry_msgs::PoseStamped>> per_object;
+  ros::WallTime last_truth, last_refined;
+
+  void onTruth(const diffdope_ros::InitialPoseArrayConstPtr& m) {
+    std::lock_guard<std::mutex> l(mutex);
+    checker->addGroundTruth(*m);
+    last_truth = ros::WallTime::now();
+  }
+  void onRefined(const diffdope_ros::RefinedPoseArrayConstPtr& m) {
+    std::lock_guard<std::mutex> l(mutex);
+    arrays.push_back(*m);
+    last_refined = ros::WallTime::now();
+  }
+  void onObjectPose(const geometry_msgs::PoseStampedConstPtr& m, const std::string& name) {
+    std::lock_guard<std::mutex> l(mutex);
+    per_object[name].push_back(*m);
+  }
+};
+
+TEST(BagAccuracy, RefinedPosesTfAndScores) {
+  ros::NodeHandle nh, pnh("~");
+  const auto cfg = diffdope::load_objects_config(pnh.param<std::string>("objects_config", ""));
+  std::map<std::string, bool> symmetric;
+  for (const auto& o : cfg.objects) symmetric[o.name] = o.symmetric;
+  Recorder rec;
+  rec.checker = std::make_unique<diffdope_ros::PoseChecker>(0.005, 2.0 * M_PI / 180, symmetric);
+  tf2_ros::Buffer tf_buffer(ros::Duration(120));
+  tf2_ros::TransformListener tf_listener(tf_buffer);
+  auto truth_sub = nh.subscribe("/ground_truth", 100, &Recorder::onTruth, &rec);
+  auto refined_sub = nh.subscribe("/diffdope_refiner/refined_poses", 100, &Recorder::onRefined, &rec);
+  std::vector<ros::Subscriber> object_subs;
+  for (const auto& o : cfg.objects)
+    object_subs.push_back(nh.subscribe<geometry_msgs::PoseStamped>(
+        "/diffdope_refiner/refined/" + o.name, 100,
+        boost::bind(&Recorder::onObjectPose, &rec, boost::placeholders::_1, o.name)));
+  ros::AsyncSpinner spinner(2);
+  spinner.start();
+
+  // Wait for the bag to end (ground truth stops) and the refiner to go quiet.
+  const ros::WallTime start = ros::WallTime::now();
+  while ((ros::WallTime::now() - start).toSec() < 120) {
+    ros::WallDuration(0.5).sleep();
+    std::lock_guard<std::mutex> l(rec.mutex);
+    const ros::WallTime now = ros::WallTime::now();
+    if (!rec.last_truth.isZero() && (now - rec.last_truth).toSec() > 3 &&
+        (rec.last_refined.isZero() || (now - rec.last_refined).toSec() > 3))
+      break;
+  }
+  spinner.stop();
+
+  std::lock_guard<std::mutex> l(rec.mutex);
+  ASSERT_FALSE(rec.arrays.empty()) << "no ~refined_poses message";
+  for (const auto& a : rec.arrays) rec.checker->addRefined(a);
+  EXPECT_EQ(rec.checker->unmatched(), 0) << "refined poses stamped with no image stamp of the bag";
+  const auto summary = rec.checker->summary();
+  for (const auto& o : cfg.objects) {
+    SCOPED_TRACE(o.name);
+    ASSERT_TRUE(summary.count(o.name)) << "no refined pose for " << o.name;
+    const auto& s = summary.at(o.name);
+    EXPECT_GE(s.count, 3);
+    EXPECT_EQ(s.within, s.count) << "max error " << 1e3 * s.max_translation_m << " mm, "
+                                 << s.max_rotation_rad * 180 / M_PI << " deg";
+    EXPECT_EQ(s.plausible, s.count);
+    // Every plausible refined pose also went out on ~refined/<name> and on TF.
+    EXPECT_EQ(int(rec.per_object[o.name].size()), s.plausible);
+  }
+  for (const auto& row : rec.checker->rows()) std::printf("%s\n", diffdope_ros::PoseChecker::formatRow(row).c_str());
+
+  double latency = 0;
+  int tf_checked = 0;
+  for (const auto& a : rec.arrays) {
+    EXPECT_GT(a.latency, 0.0);
+    latency += a.latency;
+    EXPECT_EQ(a.header.frame_id, "camera_color_optical_frame");
+    for (const auto& p : a.poses) {
+      SCOPED_TRACE(p.name);
+      EXPECT_GT(p.mask_iou, 0.8);
+      EXPECT_LE(p.mask_iou, 1.0);
+      EXPECT_GT(p.depth_inliers, 0.5);
+      EXPECT_GT(p.iterations, 0);
+      EXPECT_GT(p.time_ms, 0.0);
+      EXPECT_LT(p.loss, p.initial_loss);
+      EXPECT_TRUE(p.source == "detector" || p.source == "track") << p.source;
+      if (!p.plausible) continue;
+      const auto t = tf_buffer.lookupTransform(a.header.frame_id, "diffdope_" + p.name, a.header.stamp);
+      const auto tf_pose = diffdope_ros::pose_from_transform(t.transform, "tf");
+      const auto msg_pose = diffdope_ros::pose_from_msg(p.pose.pose, "msg");
+      EXPECT_LT((tf_pose.t - msg_pose.t).norm(), 1e-6);
+      EXPECT_LT(diffdope::rotation_angle(tf_pose.R, msg_pose.R), 1e-6);
+      ++tf_checked;
+    }
+  }
+  EXPECT_GT(tf_checked, 0);
+  const double span = rec.arrays.size() > 1 ? (rec.arrays.back().header.stamp - rec.arrays.front().header.stamp).toSec() : 0;
+  std::printf("refined %zu frames (%d object poses), mean latency %.0f ms, %.2f refined frames per bag second\n",
+              rec.arrays.size(), int(rec.checker->rows().size()), 1e3 * latency / rec.arrays.size(),
+              span > 0 ? (rec.arrays.size() - 1) / span : 0.0);
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  testing::InitGoogleTest(&argc, argv);
+  ros::init(argc, argv, "test_bag_accuracy");
+  return RUN_ALL_TESTS();
+}
