@@ -4,6 +4,7 @@
 // A refinement that fails the quality check counts against the track; after max_failures in a row it is lost.
 #include <optional>
 #include <string>
+#include <vector>
 
 #include "diffdope/pose.hpp"
 
@@ -14,9 +15,13 @@ struct TrackOptions {
   double max_detection_age = 1.0;    // seconds between a detection's stamp and the image stamp (either way)
   double track_timeout = 3.0;        // seconds a refined pose may seed later frames without a new detection
   int max_failures = 2;              // implausible refinements in a row that drop the track
+  /// Also seed with the track extrapolated at constant velocity (from the last two refined poses) when the object
+  /// moves: between refined frames a moving object can turn further than the refiner's basin.
+  bool predict = true;
+  double max_extrapolation = 2.0;    // extrapolate at most this multiple of the last interval
 };
 
-enum class SeedSource { kDetector, kTrack, kRequest };
+enum class SeedSource { kDetector, kTrack, kPrediction, kRequest };
 const char* to_string(SeedSource s);
 
 /// An initial pose in the camera frame with where it came from. Times in seconds (ROS stamps as doubles).
@@ -28,7 +33,11 @@ struct Seed {
 
 class ObjectTrack {
  public:
-  explicit ObjectTrack(const TrackOptions& options = TrackOptions()) : options_(options) {}
+  /// `pivot`: the point (model frame, e.g. the mesh centre) whose motion is extrapolated linearly; rotation is
+  /// extrapolated about it.
+  explicit ObjectTrack(const TrackOptions& options = TrackOptions(),
+                       const Eigen::Vector3d& pivot = Eigen::Vector3d::Zero())
+      : options_(options), pivot_(pivot) {}
 
   /// A detection (already in the camera frame) stamped `stamp`. Replaces any unused older detection.
   void add_detection(const Pose& pose_in_camera, double stamp);
@@ -39,6 +48,11 @@ class ObjectTrack {
   std::optional<Seed> seed_for(double image_stamp);
   /// The seed without consuming anything (service calls: "every object with a known pose").
   std::optional<Seed> peek(double image_stamp) const;
+  /// Every usable seed, best guess first: a fresh detection (consumed) and, in tracking mode, the recent track
+  /// and its constant-velocity prediction (when the last two refined frames show motion).
+  /// The refiner starts runs from each and the loss decides (a detection re-anchors a drifting track; a track
+  /// is kept when the detection is worse). Empty when there is none.
+  std::vector<Seed> seeds_for(double image_stamp);
 
   /// The outcome of refining the frame stamped `image_stamp`. Returns true when this loses the track.
   bool report(const Pose& refined, bool plausible, double image_stamp);
@@ -47,10 +61,15 @@ class ObjectTrack {
   int failures() const { return failures_; }
   void reset();
 
+  /// The constant-velocity extrapolation of the track to `image_stamp`, if the track is moving.
+  std::optional<Seed> predict(double image_stamp) const;
+
  private:
   TrackOptions options_;
   std::optional<Seed> detection_;  // latest unused detection
   std::optional<Seed> track_;      // last plausible refined pose
+  std::optional<Seed> previous_;   // the one before (constant-velocity prediction)
+  Eigen::Vector3d pivot_;
   int failures_ = 0;
 };
 

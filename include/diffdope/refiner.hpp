@@ -69,7 +69,7 @@ struct RefinerOptions {
 /// What a refinement did, with scores a caller can threshold.
 struct RefineResult {
   Pose pose;                          // refined model pose in the camera frame (metres)
-  Pose initial_pose;
+  Pose initial_pose;                  // the initial pose the winning run started from
   LossValue loss;                     // winner's final loss, per term (unweighted means) and total
   double initial_loss = 0;            // loss of the initial pose
   std::vector<double> run_losses;     // best loss of every run
@@ -77,6 +77,7 @@ struct RefineResult {
   std::vector<double> history;        // winner's loss at every iteration
   std::vector<std::vector<double>> run_histories;  // every run's loss at every iteration it ran
   int winner = -1;
+  int start = 0;                      // index of the initial pose the winning run started from
   int iterations = 0;                 // iterations actually run (early stop)
   double time_ms = 0;                 // wall time of refine()
   // Quality scores at the refined pose (at the refiner's image scale).
@@ -93,6 +94,7 @@ struct ObjectTarget {
   const Mesh* mesh = nullptr;
   Pose initial;
   cv::Mat mask;  // this object's visible mask (CV_32FC1, or any type to_mask_float takes); may be empty
+  std::vector<Pose> alternatives;  // further initial poses; the runs are shared out among all of them
 };
 
 class Refiner {
@@ -104,6 +106,11 @@ class Refiner {
   /// empty; at least one of rgb or depth is needed), `camera` their intrinsics. Throws std::invalid_argument
   /// on unusable input (NaN pose, object behind the camera, images that do not match the camera).
   RefineResult refine(const Camera& camera, const Observation& observed, const Mesh& mesh, const Pose& initial);
+  /// Several initial poses (say a fresh detection and the previous frame's refined pose): run i starts from
+  /// initials[i % n]; the lowest loss wins whichever start it came from (RefineResult::start says which).
+  /// initial_loss is the lowest loss among the starts.
+  RefineResult refine(const Camera& camera, const Observation& observed, const Mesh& mesh,
+                      const std::vector<Pose>& initials);
 
   /// Refines every object of one frame (the frame's rgb and depth, each object's own mask). An object whose
   /// input is unusable gets its reason in RefineResult::error (pose = initial, plausible = false); the others

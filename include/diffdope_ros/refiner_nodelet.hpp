@@ -106,9 +106,11 @@ class RefinerNodelet : public nodelet::Nodelet {
   /// Throws std::runtime_error (TF failure, NaN, behind the camera).
   diffdope::Pose meshPoseInCamera(const geometry_msgs::PoseStamped& pose, const Slot& slot, const Frame& frame);
   void absorbDetections(const Frame& frame);
-  std::vector<diffdope_ros::RefinedPose> refineAndPublish(const Frame& frame,
-                                                          const std::vector<std::pair<size_t, diffdope::Seed>>& seeds,
+  /// Per object (slot index), its initial poses; the refiner shares the runs among them and the loss decides.
+  using SeedList = std::vector<std::pair<size_t, std::vector<diffdope::Seed>>>;
+  std::vector<diffdope_ros::RefinedPose> refineAndPublish(const Frame& frame, const SeedList& seeds,
                                                           const diffdope::RefinerOptions& options);
+  void reportLostTrack(const Slot& slot);
   void publishOverlay(const Frame& frame, const std::vector<size_t>& slots,
                       const std::vector<diffdope::RefineResult>& results);
   void publishMarkers(const Frame& frame, const std::vector<size_t>& slots,

@@ -8,6 +8,7 @@ const char* to_string(SeedSource s) {
   switch (s) {
     case SeedSource::kDetector: return "detector";
     case SeedSource::kTrack: return "track";
+    case SeedSource::kPrediction: return "prediction";
     case SeedSource::kRequest: return "request";
   }
   return "unknown";
@@ -36,15 +37,57 @@ std::optional<Seed> ObjectTrack::seed_for(double image_stamp) {
   return s;
 }
 
+std::vector<Seed> ObjectTrack::seeds_for(double image_stamp) {
+  std::vector<Seed> out;
+  if (has_fresh_detection(image_stamp)) {
+    out.push_back(*detection_);
+    detection_.reset();
+  }
+  if (options_.tracking && track_ && image_stamp - track_->stamp <= options_.track_timeout &&
+      image_stamp >= track_->stamp - options_.max_detection_age) {
+    out.push_back(*track_);
+    if (auto p = predict(image_stamp)) out.push_back(*p);
+  }
+  return out;
+}
+
+std::optional<Seed> ObjectTrack::predict(double image_stamp) const {
+  if (!options_.predict || !track_ || !previous_) return std::nullopt;
+  const double dt_last = track_->stamp - previous_->stamp, dt = image_stamp - track_->stamp;
+  if (!(dt_last > 1e-6) || dt_last > options_.track_timeout || !(dt > 1e-6)) return std::nullopt;
+  const double s = std::min(dt / dt_last, options_.max_extrapolation);
+  const Pose& a = previous_->pose;
+  const Pose& b = track_->pose;
+  // The pivot moves on a straight line; the rotation keeps turning about the same axis at the same rate.
+  const Eigen::Vector3d ca = a * pivot_, cb = b * pivot_;
+  Eigen::AngleAxisd turn(b.R * a.R.transpose());
+  if ((cb - ca).norm() < 1e-4 && turn.angle() < 1e-3) return std::nullopt;  // not moving: the track is the guess
+  turn.angle() *= s;
+  Seed p;
+  p.pose.R = turn.toRotationMatrix() * b.R;
+  p.pose.t = cb + s * (cb - ca) - p.pose.R * pivot_;
+  p.source = SeedSource::kPrediction;
+  p.stamp = image_stamp;
+  return p;
+}
+
 bool ObjectTrack::report(const Pose& refined, bool plausible, double image_stamp) {
   if (plausible) {
     failures_ = 0;
-    if (options_.tracking) track_ = Seed{refined, SeedSource::kTrack, image_stamp};
+    if (options_.tracking) {
+      // Keep the previous pose for the velocity only when it is recent (else the motion estimate is stale).
+      if (track_ && image_stamp - track_->stamp <= options_.track_timeout && image_stamp > track_->stamp)
+        previous_ = track_;
+      else
+        previous_.reset();
+      track_ = Seed{refined, SeedSource::kTrack, image_stamp};
+    }
     return false;
   }
   ++failures_;
   if (failures_ >= options_.max_failures && track_) {
     track_.reset();
+    previous_.reset();
     return true;
   }
   return false;
@@ -53,6 +96,7 @@ bool ObjectTrack::report(const Pose& refined, bool plausible, double image_stamp
 void ObjectTrack::reset() {
   detection_.reset();
   track_.reset();
+  previous_.reset();
   failures_ = 0;
 }
 

@@ -48,17 +48,27 @@ cv::Mat window_mask(const Camera& cam, const Mesh& mesh, const Pose& pose, doubl
 
 RefineResult Refiner::refine(const Camera& camera, const Observation& observed, const Mesh& mesh,
                              const Pose& initial) {
+  return refine(camera, observed, mesh, std::vector<Pose>{initial});
+}
+
+RefineResult Refiner::refine(const Camera& camera, const Observation& observed, const Mesh& mesh,
+                             const std::vector<Pose>& initials) {
   const auto t_start = std::chrono::steady_clock::now();
   const RefinerOptions& o = options_;
   observed.validate(camera);
   if (!observed.has_rgb() && !observed.has_depth())
     throw std::invalid_argument("refine: need at least an rgb or a depth image");
-  if (!initial.is_valid(1e-4))
-    throw std::invalid_argument("refine: initial pose is not finite or its rotation is not orthonormal");
-  const Eigen::Vector3d centre0 = initial * mesh.center();
-  if (!(centre0.z() > o.render.near_plane))
-    throw std::invalid_argument("refine: initial pose puts the object behind the camera (z = " +
-                                std::to_string(centre0.z()) + " m)");
+  if (initials.empty()) throw std::invalid_argument("refine: no initial pose");
+  for (const Pose& initial : initials) {
+    if (!initial.is_valid(1e-4))
+      throw std::invalid_argument("refine: initial pose is not finite or its rotation is not orthonormal");
+    const Eigen::Vector3d centre0 = initial * mesh.center();
+    if (!(centre0.z() > o.render.near_plane))
+      throw std::invalid_argument("refine: initial pose puts the object behind the camera (z = " +
+                                  std::to_string(centre0.z()) + " m)");
+  }
+  const Pose& initial = initials.front();
+  const int starts = int(initials.size());
 
   const Camera cam = o.image_scale == 1.0 ? camera : camera.scaled(o.image_scale);
   Observation obs = o.image_scale == 1.0 ? observed : observed.resized(cam);
@@ -70,6 +80,7 @@ RefineResult Refiner::refine(const Camera& camera, const Observation& observed, 
     if (cv::countNonZero(obs.mask > 0) == 0) throw std::invalid_argument("refine: the object mask is empty");
   } else {
     obs.mask = window_mask(cam, mesh, initial, o.no_mask_window);
+    for (int j = 1; j < starts; ++j) obs.mask = cv::max(obs.mask, window_mask(cam, mesh, initials[j], o.no_mask_window));
     loss.weight_mask = 0;  // the window is not an observation of the silhouette
   }
 
@@ -86,7 +97,11 @@ RefineResult Refiner::refine(const Camera& camera, const Observation& observed, 
   }
   if (B == 1) res.learning_rates[0] = 0.5 * (o.lr_low + o.lr_high);
 
-  std::vector<Pose> poses(B, initial), best_pose(B, initial);
+  // Several initial poses (e.g. a new detection and the previous frame's result): run i starts from
+  // initials[i % starts], so every start gets a spread of learning rates and the loss picks the winner.
+  std::vector<Pose> poses(B, initial);
+  for (int i = 0; i < B; ++i) poses[i] = initials[i % starts];
+  std::vector<Pose> best_pose = poses;
   std::vector<LossValue> values, best(B);
   for (auto& b : best) b.total = std::numeric_limits<double>::infinity();
   res.run_histories.assign(B, {});
@@ -107,7 +122,11 @@ RefineResult Refiner::refine(const Camera& camera, const Observation& observed, 
     batch.resize(active.size());
     for (size_t j = 0; j < active.size(); ++j) batch[j] = poses[active[j]];
     renderer_->evaluate(cam, mesh, obs, batch, loss, !last, values);
-    if (k == 0) res.initial_loss = values[0].total;
+    if (k == 0) {
+      res.initial_loss = values[0].total;
+      for (int j = 1; j < std::min(starts, int(values.size())); ++j)
+        res.initial_loss = std::min(res.initial_loss, values[j].total);
+    }
     for (size_t j = 0; j < active.size(); ++j) {
       const int i = active[j];
       res.run_histories[i].push_back(values[j].total);
@@ -138,6 +157,8 @@ RefineResult Refiner::refine(const Camera& camera, const Observation& observed, 
   for (int i = 0; i < B; ++i) res.run_losses[i] = best[i].total;
   res.winner = int(std::min_element(res.run_losses.begin(), res.run_losses.end()) - res.run_losses.begin());
   res.pose = best_pose[res.winner];
+  res.start = res.winner % starts;
+  res.initial_pose = initials[res.start];
   res.loss = best[res.winner];
   res.history = res.run_histories[res.winner];
 
@@ -180,7 +201,9 @@ std::vector<RefineResult> Refiner::refine_all(const Camera& camera, const Observ
     try {
       if (!t.mesh) throw std::invalid_argument("no mesh");
       if (!t.mask.empty()) o.mask = t.mask.type() == CV_32FC1 ? t.mask : to_mask_float(t.mask);
-      out.push_back(refine(camera, o, *t.mesh, t.initial));
+      std::vector<Pose> initials{t.initial};
+      initials.insert(initials.end(), t.alternatives.begin(), t.alternatives.end());
+      out.push_back(refine(camera, o, *t.mesh, initials));
     } catch (const std::exception& e) {
       RefineResult r;
       r.pose = r.initial_pose = t.initial;

@@ -63,6 +63,7 @@ struct Args {
   double rate = 10.0;
   int detector_every = 3;
   double detector_latency = 0.15;
+  int detector_frames = -1;  // detections only on frames k < detector_frames (-1: all): then the detector is silent
   int objects = 3;
   uint64_t seed = 1;
   int width = 640, height = 480;
@@ -77,6 +78,7 @@ void usage(std::ostream& os) {
         "         [--detector-latency S (0.15)] [--objects 1|2|3 (3)] [--seed S (1)] [--width W (640)]\n"
         "         [--height H (480)] [--depth-encoding 16UC1|32FC1 (16UC1)] [--rot-noise-deg D (5)]\n"
         "         [--trans-noise-m M (0.01)] [--compression none|lz4|bz2 (lz4)]\n"
+        "         [--detector-frames N (all): the detector goes silent from frame N on (tracking)]\n"
         "Writes DIR/demo.bag, DIR/meshes/<name>.ply and DIR/objects.yaml (see the header of make_demo_bag.cpp).\n";
 }
 
@@ -130,6 +132,7 @@ Args parse_args(int argc, char** argv) {
     else if (opt == "--frames") a.frames = int(parse_int(opt, v, 1, 100000));
     else if (opt == "--rate") a.rate = parse_double(opt, v, 0.0, 1000.0, false);
     else if (opt == "--detector-every") a.detector_every = int(parse_int(opt, v, 1, 100000));
+    else if (opt == "--detector-frames") a.detector_frames = int(parse_int(opt, v, 0, 100000));
     else if (opt == "--detector-latency") a.detector_latency = parse_double(opt, v, 0.0, 60.0, true);
     else if (opt == "--objects") a.objects = int(parse_int(opt, v, 1, 3));
     else if (opt == "--seed") a.seed = uint64_t(parse_int(opt, v, 0, std::numeric_limits<long long>::max()));
@@ -472,7 +475,7 @@ int main(int argc, char** argv) {
       }
       bag.write("/ground_truth", t, gt);
 
-      if (k % args.detector_every == 0) {
+      if (k % args.detector_every == 0 && (args.detector_frames < 0 || k < args.detector_frames)) {
         for (size_t i = 0; i < n; ++i) {
           const Pose noisy = perturb_pose(poses[i], objects[i].mesh.center(), args.rot_noise_deg * M_PI / 180.0,
                                           args.trans_noise_m, detector_rng);

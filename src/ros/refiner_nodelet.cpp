@@ -85,6 +85,7 @@ void RefinerNodelet::loadParameters() {
   track_options_.max_detection_age = pnh.param("max_detection_age", 1.0);
   track_options_.track_timeout = pnh.param("track_timeout", 3.0);
   track_options_.max_failures = std::max(1, pnh.param("max_track_failures", 2));
+  track_options_.predict = pnh.param("predict_motion", true);
   errors_.set_throttle_period(pnh.param("error_throttle", 5.0));
 }
 
@@ -110,9 +111,9 @@ void RefinerNodelet::loadObjects() {
   for (size_t i = 0; i < cfg.objects.size(); ++i) {
     auto slot = std::make_unique<Slot>();
     slot->config = cfg.objects[i];
-    slot->track = diffdope::ObjectTrack(track_options_);
     try {
       slot->mesh = std::make_unique<diffdope::Mesh>(diffdope::load_object_mesh(slot->config));
+      slot->track = diffdope::ObjectTrack(track_options_, slot->mesh->center().cast<double>());
       NODELET_INFO_STREAM("object '" << slot->config.name << "': " << slot->mesh->num_triangles() << " triangles, "
                                      << "diameter " << fmt(slot->mesh->diameter()) << " m");
     } catch (const std::exception& e) {
@@ -462,11 +463,12 @@ void RefinerNodelet::absorbDetections(const Frame& frame) {
 void RefinerNodelet::processStreaming(const std::shared_ptr<const Frame>& frame) {
   if (!frame) return;
   absorbDetections(*frame);
-  std::vector<std::pair<size_t, diffdope::Seed>> seeds;
+  SeedList seeds;
   const double stamp = frame->header.stamp.toSec();
   for (size_t i = 0; i < slots_.size(); ++i) {
     if (!slots_[i]->mesh) continue;
-    if (auto seed = slots_[i]->track.seed_for(stamp)) seeds.emplace_back(i, *seed);
+    auto starts = slots_[i]->track.seeds_for(stamp);
+    if (!starts.empty()) seeds.emplace_back(i, std::move(starts));
   }
   if (!seeds.empty()) refineAndPublish(*frame, seeds, refiner_options_);
 }
@@ -509,14 +511,14 @@ diffdope_ros::Refine::Response RefinerNodelet::processRequest(const diffdope_ros
 
   absorbDetections(*frame);
   const double stamp = frame->header.stamp.toSec();
-  std::vector<std::pair<size_t, diffdope::Seed>> seeds;
+  SeedList seeds;
   std::vector<bool> chosen(slots_.size(), false);
   for (const auto& p : req.initial_poses) {
     const size_t i = size_t(find(p.name));
     if (chosen[i]) return fail("object '" + p.name + "' has two initial poses in the request");
     try {
-      seeds.emplace_back(i, diffdope::Seed{meshPoseInCamera(p.pose, *slots_[i], *frame),
-                                           diffdope::SeedSource::kRequest, stamp});
+      seeds.emplace_back(i, std::vector<diffdope::Seed>{diffdope::Seed{
+                                meshPoseInCamera(p.pose, *slots_[i], *frame), diffdope::SeedSource::kRequest, stamp}});
     } catch (const std::exception& e) {
       return fail(e.what());
     }
@@ -526,8 +528,8 @@ diffdope_ros::Refine::Response RefinerNodelet::processRequest(const diffdope_ros
   if (req.object_names.empty() && req.initial_poses.empty()) {
     for (size_t i = 0; i < slots_.size(); ++i)
       if (slots_[i]->mesh)
-        if (auto seed = slots_[i]->track.seed_for(stamp)) {
-          seeds.emplace_back(i, *seed);
+        if (auto starts = slots_[i]->track.seeds_for(stamp); !starts.empty()) {
+          seeds.emplace_back(i, std::move(starts));
           chosen[i] = true;
         }
     if (seeds.empty()) return fail("no object has a known pose (no recent detection or track); pass initial_poses");
@@ -535,8 +537,8 @@ diffdope_ros::Refine::Response RefinerNodelet::processRequest(const diffdope_ros
     for (const auto& n : req.object_names) {
       const size_t i = size_t(find(n));
       if (chosen[i]) continue;
-      if (auto seed = slots_[i]->track.seed_for(stamp)) {
-        seeds.emplace_back(i, *seed);
+      if (auto starts = slots_[i]->track.seeds_for(stamp); !starts.empty()) {
+        seeds.emplace_back(i, std::move(starts));
         chosen[i] = true;
       } else {
         missing.push_back(n);
@@ -558,29 +560,31 @@ diffdope_ros::Refine::Response RefinerNodelet::processRequest(const diffdope_ros
 }
 
 std::vector<diffdope_ros::RefinedPose> RefinerNodelet::refineAndPublish(
-    const Frame& frame, const std::vector<std::pair<size_t, diffdope::Seed>>& seeds,
-    const diffdope::RefinerOptions& options) {
+    const Frame& frame, const SeedList& seeds, const diffdope::RefinerOptions& options) {
   const ros::WallTime start = ros::WallTime::now();
   std::vector<diffdope::ObjectTarget> targets;
-  std::vector<size_t> slot_of;
+  std::vector<size_t> slot_of, seeds_of;
   std::vector<diffdope_ros::RefinedPose> out;
-  for (const auto& [i, seed] : seeds) {
+  for (size_t n = 0; n < seeds.size(); ++n) {
+    const auto& [i, starts] = seeds[n];
     Slot& s = *slots_[i];
     diffdope::ObjectTarget t;
     t.mesh = s.mesh.get();
-    t.initial = seed.pose;
+    t.initial = starts.front().pose;
+    for (size_t j = 1; j < starts.size(); ++j) t.alternatives.push_back(starts[j].pose);
     if (!frame.labels.empty()) {
       t.mask = object_mask(frame.labels, s.config.mask_label);
       if (cv::countNonZero(t.mask) == 0) {
         // The segmentation says the object is not visible: refining against an empty mask would push it away.
         errors_.warn("empty_mask_" + s.config.name, "object '" + s.config.name + "' has no pixels in the mask (label " +
                                                         std::to_string(s.config.mask_label) + "): not refined");
-        s.track.report(seed.pose, false, frame.header.stamp.toSec());
+        if (s.track.report(t.initial, false, frame.header.stamp.toSec())) reportLostTrack(s);
         continue;
       }
     }
     targets.push_back(t);
     slot_of.push_back(i);
+    seeds_of.push_back(n);
   }
   if (targets.empty()) return out;
   diffdope::Refiner refiner(options);
@@ -593,19 +597,14 @@ std::vector<diffdope_ros::RefinedPose> RefinerNodelet::refineAndPublish(
   for (size_t k = 0; k < results.size(); ++k) {
     Slot& s = *slots_[slot_of[k]];
     const diffdope::RefineResult& r = results[k];
-    const diffdope::Seed& seed = seeds[std::find_if(seeds.begin(), seeds.end(),
-                                                    [&](const auto& p) { return p.first == slot_of[k]; }) -
-                                       seeds.begin()]
-                                     .second;
+    const std::vector<diffdope::Seed>& starts = seeds[seeds_of[k]].second;
     if (!r.error.empty()) {
       errors_.error("refine_" + s.config.name, "object '" + s.config.name + "' not refined: " + r.error);
-      s.track.report(seed.pose, false, frame.header.stamp.toSec());
+      if (s.track.report(starts.front().pose, false, frame.header.stamp.toSec())) reportLostTrack(s);
       continue;
     }
-    if (s.track.report(r.pose, r.plausible, frame.header.stamp.toSec()))
-      errors_.warn("lost_" + s.config.name, "lost track of '" + s.config.name + "' (" +
-                                                std::to_string(track_options_.max_failures) +
-                                                " implausible refinements in a row); waiting for a detection");
+    const diffdope::Seed& seed = starts[std::min<size_t>(size_t(r.start), starts.size() - 1)];
+    if (s.track.report(r.pose, r.plausible, frame.header.stamp.toSec())) reportLostTrack(s);
     implausible += !r.plausible;
     const diffdope::Pose inv_model = s.config.model_transform.inverse();
     diffdope_ros::RefinedPose p;
@@ -637,6 +636,7 @@ std::vector<diffdope_ros::RefinedPose> RefinerNodelet::refineAndPublish(
   const double latency = (ros::Time::now() - frame.header.stamp).toSec();
   array.poses = out;
   array.latency = latency;
+  array.processing_time = (ros::WallTime::now() - frame.received).toSec();
   refined_pub_.publish(array);
   {
     std::lock_guard<std::mutex> lock(work_mutex_);
@@ -650,9 +650,19 @@ std::vector<diffdope_ros::RefinedPose> RefinerNodelet::refineAndPublish(
     stats_.latency_sum += latency;
     stats_.last_refine_ms = (now - start).toSec() * 1e3;
   }
-  if (overlay_pub_.getNumSubscribers() > 0) publishOverlay(frame, slot_of, results);
-  if (markers_pub_.getNumSubscribers() > 0) publishMarkers(frame, slot_of, results);
+  try {  // visualisation must never cost the refinement its result
+    if (overlay_pub_.getNumSubscribers() > 0) publishOverlay(frame, slot_of, results);
+    if (markers_pub_.getNumSubscribers() > 0) publishMarkers(frame, slot_of, results);
+  } catch (const std::exception& e) {
+    errors_.error("visualisation", std::string("overlay/markers not published: ") + e.what());
+  }
   return out;
+}
+
+void RefinerNodelet::reportLostTrack(const Slot& s) {
+  errors_.warn("lost_" + s.config.name, "lost track of '" + s.config.name + "' (" +
+                                            std::to_string(track_options_.max_failures) +
+                                            " implausible refinements in a row); waiting for a detection");
 }
 
 void RefinerNodelet::publishOverlay(const Frame& frame, const std::vector<size_t>& slots,
@@ -668,8 +678,7 @@ void RefinerNodelet::publishOverlay(const Frame& frame, const std::vector<size_t
     auto outline = [&](const diffdope::Pose& pose, const cv::Scalar& colour, int thickness) {
       const auto img = renderer->render(frame.camera, *s.mesh, {pose}).front();
       if (img.coverage.empty()) return;
-      cv::Mat full = cv::Mat::zeros(canvas.size(), CV_8U);
-      cv::Mat(img.coverage >= 0.5).copyTo(full(img.roi));
+      cv::Mat full = img.coverage >= 0.5;  // full-frame coverage
       std::vector<std::vector<cv::Point>> contours;
       cv::findContours(full, contours, cv::RETR_EXTERNAL, cv::CHAIN_APPROX_SIMPLE);
       cv::drawContours(canvas, contours, -1, colour, thickness, cv::LINE_AA);

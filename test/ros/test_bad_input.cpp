@@ -36,9 +36,23 @@ struct Node {
   diffdope::Pose truth_box;
 
   void onLog(const rosgraph_msgs::LogConstPtr& m) {
-    if (m->level < rosgraph_msgs::Log::ERROR) return;
     std::lock_guard<std::mutex> l(mutex);
-    errors.push_back(m->msg);
+    if (m->level >= rosgraph_msgs::Log::ERROR) errors.push_back(m->msg);
+    else if (m->level == rosgraph_msgs::Log::WARN) warnings.push_back(m->msg);
+  }
+  std::vector<std::string> warnings;
+  bool waitForWarning(const std::string& needle, double timeout = 8.0) {
+    const ros::WallTime start = ros::WallTime::now();
+    while ((ros::WallTime::now() - start).toSec() < timeout) {
+      {
+        std::lock_guard<std::mutex> l(mutex);
+        for (const auto& e : warnings)
+          if (e.find(needle) != std::string::npos) return true;
+      }
+      ros::WallDuration(0.05).sleep();
+    }
+    ADD_FAILURE() << "no warning containing '" << needle << "'";
+    return false;
   }
   void onDiag(const diagnostic_msgs::DiagnosticArrayConstPtr& m) {
     std::string text;
@@ -223,6 +237,31 @@ TEST(BadInput, StillRefinesAGoodFrameAfterwards) {
                                             n.truth_box, false);
   EXPECT_LT(err.translation_m, 0.005);
   EXPECT_LT(err.rotation_rad, 2.0 * M_PI / 180);
+}
+
+TEST(BadInput, QualityCheckDropsALostTrack) {
+  // The box is tracked now. Frames whose mask no longer shows it fail the quality check; after
+  // ~max_track_failures (2) of them the track is dropped, and later good frames without a detection are not
+  // refined from the stale pose.
+  Node& n = *node;
+  auto empty_mask = n.good_mask;
+  std::fill(empty_mask.data.begin(), empty_mask.data.end(), 0);
+  for (int i = 0; i < 3; ++i) {
+    n.publishSet(n.good_rgb, n.good_info, n.good_depth, empty_mask);
+    ros::WallDuration(0.6).sleep();
+  }
+  n.waitForWarning("lost track of 'box'");
+  int before;
+  {
+    std::lock_guard<std::mutex> l(n.mutex);
+    before = n.refined_box_count;
+  }
+  for (int i = 0; i < 3; ++i) {
+    n.publishGood();
+    ros::WallDuration(0.5).sleep();
+  }
+  std::lock_guard<std::mutex> l(n.mutex);
+  EXPECT_EQ(n.refined_box_count, before) << "refined from a lost track";
 }
 
 bool loadGoodFrame(Node& n, const std::string& bag_path) {

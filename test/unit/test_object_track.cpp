@@ -226,3 +226,72 @@ TEST(ObjectTrack, ResetForgetsEverything) {
   EXPECT_FALSE(t.has_fresh_detection(10.2));
   EXPECT_FALSE(t.seed_for(10.2).has_value());
 }
+
+TEST(ObjectTrack, SeedsForGivesDetectionAndTrackTogether) {
+  diffdope::TrackOptions o;
+  o.tracking = true;
+  diffdope::ObjectTrack track(o);
+  EXPECT_TRUE(track.seeds_for(10.0).empty());
+  diffdope::Pose tracked, detected;
+  tracked.t = Eigen::Vector3d(0, 0, 0.5);
+  detected.t = Eigen::Vector3d(0.01, 0, 0.5);
+  track.report(tracked, true, 10.0);
+  track.add_detection(detected, 10.05);
+  auto seeds = track.seeds_for(10.1);
+  ASSERT_EQ(seeds.size(), 2u);
+  EXPECT_EQ(seeds[0].source, diffdope::SeedSource::kDetector);
+  EXPECT_EQ(seeds[1].source, diffdope::SeedSource::kTrack);
+  // The detection was consumed; the track stays.
+  seeds = track.seeds_for(10.2);
+  ASSERT_EQ(seeds.size(), 1u);
+  EXPECT_EQ(seeds[0].source, diffdope::SeedSource::kTrack);
+  // Without tracking only detections seed.
+  o.tracking = false;
+  diffdope::ObjectTrack plain(o);
+  plain.report(tracked, true, 10.0);
+  EXPECT_TRUE(plain.seeds_for(10.1).empty());
+}
+
+TEST(ObjectTrack, PredictsAtConstantVelocityAboutThePivot) {
+  diffdope::TrackOptions o;
+  o.tracking = true;
+  const Eigen::Vector3d pivot(0.0, 0.0, 0.05);  // model-frame centre, off the origin
+  diffdope::ObjectTrack track(o, pivot);
+  // The object turns 5 deg about z through the pivot and its pivot moves 1 cm in x per 0.1 s.
+  auto pose_at = [&](double k) {
+    diffdope::Pose p;
+    p.R = Eigen::AngleAxisd(k * 5.0 * M_PI / 180, Eigen::Vector3d::UnitZ()).toRotationMatrix();
+    const Eigen::Vector3d centre(0.01 * k, 0.0, 0.6);
+    p.t = centre - p.R * pivot;
+    return p;
+  };
+  track.report(pose_at(0), true, 10.0);
+  EXPECT_FALSE(track.predict(10.3).has_value());  // one pose: no velocity yet
+  track.report(pose_at(1), true, 10.1);
+  const auto p = track.predict(10.3);  // two intervals later
+  ASSERT_TRUE(p.has_value());
+  EXPECT_EQ(p->source, diffdope::SeedSource::kPrediction);
+  const diffdope::Pose expected = pose_at(3);
+  EXPECT_LT((p->pose.t - expected.t).norm(), 1e-9);
+  EXPECT_LT(diffdope::rotation_angle(p->pose.R, expected.R), 1e-9);
+  // seeds_for offers the track and the prediction.
+  const auto seeds = track.seeds_for(10.3);
+  ASSERT_EQ(seeds.size(), 2u);
+  EXPECT_EQ(seeds[0].source, diffdope::SeedSource::kTrack);
+  EXPECT_EQ(seeds[1].source, diffdope::SeedSource::kPrediction);
+  // Extrapolation is capped (max_extrapolation intervals).
+  const auto far = track.predict(11.0);
+  ASSERT_TRUE(far.has_value());
+  EXPECT_LT((far->pose * pivot - pose_at(3) * pivot).norm(), 1e-9);
+  // A still object gives no prediction (the track is the guess).
+  diffdope::ObjectTrack still(o, pivot);
+  still.report(pose_at(1), true, 10.0);
+  still.report(pose_at(1), true, 10.1);
+  EXPECT_FALSE(still.predict(10.2).has_value());
+  // predict = false turns it off.
+  o.predict = false;
+  diffdope::ObjectTrack off(o, pivot);
+  off.report(pose_at(0), true, 10.0);
+  off.report(pose_at(1), true, 10.1);
+  EXPECT_FALSE(off.predict(10.2).has_value());
+}

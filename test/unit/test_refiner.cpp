@@ -60,6 +60,38 @@ TEST(Refiner, RecoversHardPerturbation) {
   EXPECT_DOUBLE_EQ(r.loss.total, *std::min_element(r.run_losses.begin(), r.run_losses.end()));
 }
 
+TEST(Refiner, SeveralStartsTheBetterOneWins) {
+  // A good start (a tracked pose) and a hopeless one (a wrong detection, 90 deg off): whichever order they
+  // come in, the winner comes from the good one and RefineResult says so.
+  const Scene s = make_scene(2);
+  std::mt19937_64 rng(11);
+  const Pose good = perturb_pose(s.truth, s.mesh.center(), 3 * M_PI / 180, 0.004, rng);
+  const Pose bad = perturb_pose(s.truth, s.mesh.center(), 90 * M_PI / 180, 0.03, rng);
+  RefinerOptions o = test_options();
+  o.iterations = 30;
+  Refiner refiner(o);
+  for (int order = 0; order < 2; ++order) {
+    const std::vector<Pose> starts = order == 0 ? std::vector<Pose>{good, bad} : std::vector<Pose>{bad, good};
+    const RefineResult r = refiner.refine(s.cam, s.obs, s.mesh, starts);
+    EXPECT_EQ(r.start, order == 0 ? 0 : 1);
+    EXPECT_LT((r.initial_pose.t - good.t).norm(), 1e-12);
+    EXPECT_LT(add_mm(s, r.pose), 2.0);
+    EXPECT_EQ(r.run_losses.size(), 16u);
+  }
+  // refine_all passes ObjectTarget::alternatives as further starts.
+  ObjectTarget t;
+  t.mesh = &s.mesh;
+  t.initial = bad;
+  t.alternatives = {good};
+  t.mask = s.obs.mask;
+  Observation frame = s.obs;
+  frame.mask = cv::Mat();
+  const auto all = refiner.refine_all(s.cam, frame, {t});
+  ASSERT_EQ(all.size(), 1u);
+  EXPECT_EQ(all[0].start, 1);
+  EXPECT_LT(add_mm(s, all[0].pose), 2.0);
+}
+
 TEST(Refiner, EasyStartsDoNotGetWorse) {
   for (uint32_t seed : {2u, 3u}) {
     const Scene s = make_scene(seed);
