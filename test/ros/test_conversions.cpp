@@ -323,6 +323,16 @@ TEST(RgbFromImage, ZeroSizeThrows) {
   EXPECT_THROW(rgb_from_image(make_image("rgb8", 2, 0, 6, {})), std::invalid_argument);
 }
 
+TEST(RgbFromImage, StepSmallerThanRowThrows) {
+  // width 4 rgb8 needs 12 bytes a row; a step of 3 with matching data size must still be rejected.
+  const sensor_msgs::Image im = make_image("rgb8", 4, 2, 3, std::vector<uint8_t>(6, 1));
+  EXPECT_THROW(rgb_from_image(im), std::invalid_argument);
+  const sensor_msgs::Image d = make_image("16UC1", 4, 2, 4, std::vector<uint8_t>(8, 1));
+  EXPECT_THROW(depth_from_image(d), std::invalid_argument);
+  const sensor_msgs::Image l = make_image("mono8", 4, 2, 2, std::vector<uint8_t>(4, 1));
+  EXPECT_THROW(labels_from_image(l), std::invalid_argument);
+}
+
 TEST(RgbFromImage, ZeroStepThrows) {
   sensor_msgs::Image im = uniform_image("rgb8", 2, 2, {1, 2, 3});
   im.step = 0;
@@ -601,3 +611,9 @@ TEST(Poses, ZeroQuaternionThrowsNamingWhat) {
 }
 
 }  // namespace
+
+// catkin_add_gtest links gtest but not gtest_main: the one main() of diffdope_ros_unit_tests lives here.
+int main(int argc, char** argv) {
+  testing::InitGoogleTest(&argc, argv);
+  return RUN_ALL_TESTS();
+}
