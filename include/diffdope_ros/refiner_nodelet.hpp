@@ -22,6 +22,7 @@
 #include <tf2_ros/transform_broadcaster.h>
 #include <tf2_ros/transform_listener.h>
 
+#include <atomic>
 #include <condition_variable>
 #include <deque>
 #include <future>
@@ -68,6 +69,7 @@ class RefinerNodelet : public nodelet::Nodelet {
     std::optional<geometry_msgs::PoseStamped> pending_detection;  // raw detector message, any frame
     ros::Subscriber detection_sub;
     ros::Publisher pose_pub;
+    std::atomic<bool> tracking{false};  // track.tracking() for diagnostics (the track itself is the worker's)
     ros::Time last_tf_stamp;  // tf2 rejects a second transform at the same stamp (service on the same frame)
   };
 

@@ -81,7 +81,8 @@ void RefinerNodelet::loadParameters() {
   detection_prefix_ = pnh.param<std::string>("detection_topic_prefix", "/dope/pose_");
   publish_tf_ = pnh.param("publish_tf", true);
   publish_implausible_ = pnh.param("publish_implausible", false);
-  track_options_.tracking = mode_ == Mode::kTracking;
+  // on_request also seeds from its own previous results ("refine again" on a newer frame).
+  track_options_.tracking = mode_ != Mode::kContinuous;
   track_options_.max_detection_age = pnh.param("max_detection_age", 1.0);
   track_options_.track_timeout = pnh.param("track_timeout", 3.0);
   track_options_.max_failures = std::max(1, pnh.param("max_track_failures", 2));
@@ -293,7 +294,7 @@ void RefinerNodelet::storeDetection(const geometry_msgs::PoseStamped& pose, size
     pose_from_msg(pose.pose, origin);  // reject NaN / zero quaternions at once
     if (pose.header.frame_id.empty()) throw std::invalid_argument(origin + ": empty header.frame_id");
   } catch (const std::exception& e) {
-    errors_.error("pose", std::string("initial pose ignored: ") + e.what());
+    errors_.error("pose/" + slots_[slot]->config.name, std::string("initial pose ignored: ") + e.what());
     return;
   }
   std::lock_guard<std::mutex> lock(detections_mutex_);
@@ -360,7 +361,7 @@ void RefinerNodelet::onDiagnostics(diagnostic_updater::DiagnosticStatusWrapper& 
   stat.add("objects enabled", std::to_string(enabled) + " of " + std::to_string(slots_.size()));
   for (const auto& slot : slots_)
     stat.add("object " + slot->config.name,
-             slot->mesh ? (slot->track.tracking() ? "tracking" : "waiting for a pose") : "disabled: " + slot->disabled_reason);
+             slot->mesh ? (slot->tracking ? "tracking" : "waiting for a pose") : "disabled: " + slot->disabled_reason);
   stat.add("frames synchronized", s.frames_synced);
   stat.add("frames refined", s.frames_refined);
   stat.add("frames skipped (worker busy)", s.frames_skipped);
@@ -455,7 +456,7 @@ void RefinerNodelet::absorbDetections(const Frame& frame) {
       const double stamp = msg.header.stamp.isZero() ? frame.header.stamp.toSec() : msg.header.stamp.toSec();
       s.track.add_detection(meshPoseInCamera(msg, s, frame), stamp);
     } catch (const std::exception& e) {
-      errors_.error("pose", std::string("initial pose ignored: ") + e.what());
+      errors_.error("pose/" + s.config.name, std::string("initial pose ignored: ") + e.what());
     }
   }
 }
@@ -586,7 +587,10 @@ std::vector<diffdope_ros::RefinedPose> RefinerNodelet::refineAndPublish(
     slot_of.push_back(i);
     seeds_of.push_back(n);
   }
-  if (targets.empty()) return out;
+  if (targets.empty()) {
+    for (const auto& [i, starts] : seeds) slots_[i]->tracking = slots_[i]->track.tracking();
+    return out;
+  }
   diffdope::Refiner refiner(options);
   std::vector<diffdope::RefineResult> results = refiner.refine_all(frame.camera, frame.observation, targets);
 
@@ -632,6 +636,7 @@ std::vector<diffdope_ros::RefinedPose> RefinerNodelet::refineAndPublish(
     t.transform = transform_to_msg(r.pose * inv_model);
     transforms.push_back(t);
   }
+  for (const auto& [i, starts] : seeds) slots_[i]->tracking = slots_[i]->track.tracking();
   if (publish_tf_ && !transforms.empty()) tf_broadcaster_->sendTransform(transforms);
   const double latency = (ros::Time::now() - frame.header.stamp).toSec();
   array.poses = out;

@@ -24,6 +24,11 @@ struct World {
   std::vector<std::string> names;
   std::map<int64_t, diffdope_ros::InitialPoseArray> truth;  // by stamp
   int streamed = 0;
+  bool expect_streaming = true;  // false: mode on_request, only service calls refine
+  bool hasTruth() {
+    std::lock_guard<std::mutex> l(mutex);
+    return !truth.empty();
+  }
   void onTruth(const diffdope_ros::InitialPoseArrayConstPtr& m) {
     std::lock_guard<std::mutex> l(mutex);
     truth[m->header.stamp.toNSec()] = *m;
@@ -59,6 +64,21 @@ World* world = nullptr;
 bool call(diffdope_ros::Refine& srv) { return ros::service::call(kService, srv); }
 
 TEST(RefineService, ServedDuringStreaming) {
+  if (!world->expect_streaming) {  // on_request: the bag plays, nothing is refined until the call
+    const ros::WallTime start = ros::WallTime::now();
+    while (!world->hasTruth() && (ros::WallTime::now() - start).toSec() < 60) ros::WallDuration(0.2).sleep();
+    ASSERT_TRUE(world->hasTruth()) << "the bag never played";
+    ros::WallDuration(3.0).sleep();
+    EXPECT_EQ(world->streamedCount(), 0) << "refined without a request in on_request mode";
+    diffdope_ros::Refine srv;
+    ASSERT_TRUE(call(srv));
+    ASSERT_TRUE(srv.response.success) << srv.response.message;
+    EXPECT_EQ(srv.response.results.size(), world->names.size());
+    world->expectAccurate(srv.response.results);
+    ros::WallDuration(2.0).sleep();
+    EXPECT_EQ(world->streamedCount(), 1) << "only the request's own result is published";
+    return;
+  }
   // Streaming has started: at least one refined frame.
   const ros::WallTime start = ros::WallTime::now();
   while (world->streamedCount() == 0 && (ros::WallTime::now() - start).toSec() < 60) ros::WallDuration(0.2).sleep();
@@ -186,6 +206,7 @@ int main(int argc, char** argv) {
   ros::NodeHandle nh, pnh("~");
   World w;
   world = &w;
+  w.expect_streaming = pnh.param("expect_streaming", true);
   for (const auto& o : diffdope::load_objects_config(pnh.param<std::string>("objects_config", "")).objects) {
     w.names.push_back(o.name);
     w.symmetric[o.name] = o.symmetric;
