@@ -14,23 +14,13 @@
 #include "diffdope/kernels/vertex_stage.hpp"
 #include "diffdope/renderer.hpp"
 #include "diffdope/thread_pool.hpp"
+#include "loss_setup.hpp"
+#include "pixel_rect.hpp"
 
 namespace diffdope {
 namespace {
 
-/// Pixel rectangle [x0, x1) x [y0, y1).
-struct Rect {
-  int x0 = 0, y0 = 0, x1 = 0, y1 = 0;
-  int width() const { return x1 - x0; }
-  int height() const { return y1 - y0; }
-  bool empty() const { return x1 <= x0 || y1 <= y0; }
-};
-
-Rect unite(const Rect& a, const Rect& b) {
-  if (a.empty()) return b;
-  if (b.empty()) return a;
-  return {std::min(a.x0, b.x0), std::min(a.y0, b.y0), std::max(a.x1, b.x1), std::max(a.y1, b.y1)};
-}
+using Rect = PixelRect;
 
 /// Scratch memory of one worker; reused across hypotheses and calls (no per-iteration allocation).
 struct Workspace {
@@ -130,72 +120,43 @@ Rect CpuRenderer::rasterize(const CallContext& ctx, const Pose& pose, Workspace&
   const ProjectedView G = projected_view(ws);
 
   // Region of interest: projected model box U observed mask box, plus margin.
-  Rect roi{0, 0, K.width, K.height};
-  if (ctx.use_roi) {
-    Rect model{0, 0, K.width, K.height};  // unbounded projection (box reaches the near plane): whole image
-    const Eigen::AlignedBox2d b = ctx.camera.project_bounds(ctx.source_mesh->bbox_corners(pose), ctx.near_z);
-    if (!b.isEmpty()) {
-      const Eigen::Vector2d lo = b.min().cwiseMax(-1e6), hi = b.max().cwiseMin(1e6);
-      model = {static_cast<int>(std::floor(lo.x())), static_cast<int>(std::floor(lo.y())),
-               static_cast<int>(std::ceil(hi.x())) + 1, static_cast<int>(std::ceil(hi.y())) + 1};
-    }
-    roi = unite(model, ctx.mask_box);
-    roi = {std::max(0, roi.x0 - ctx.margin), std::max(0, roi.y0 - ctx.margin),
-           std::min(K.width, roi.x1 + ctx.margin), std::min(K.height, roi.y1 + ctx.margin)};
-    if (roi.empty()) roi = {0, 0, 1, 1};
-  }
+  const Rect roi = hypothesis_roi(ctx.camera, *ctx.source_mesh, pose, ctx.near_z, ctx.mask_box, ctx.margin, ctx.use_roi);
   const int W = roi.width(), H = roi.height(), N = W * H;
   ws.zbuf.assign(N, std::numeric_limits<float>::infinity());
   ws.tri.assign(N, -1);
 
-  // Z-buffer raster with exact (fixed-point) coverage. Depth is interpolated as 1/z (linear in the image);
-  // ties keep the lower triangle index.
-  constexpr long long kOne = 1LL << kSubpixelBits;
+  // Z-buffer raster with exact (fixed-point) coverage (kernels/raster.hpp). Ties keep the lower triangle index.
   for (int t = 0; t < nt; ++t) {
     if (ws.tri_area[t] == 0.f) continue;
     const int* v = M.triangles + 3 * t;
     const Vec2f s[3] = {ws.pix[v[0]], ws.pix[v[1]], ws.pix[v[2]]};
-    const FixedPoint2 f[3] = {to_fixed(s[0]), to_fixed(s[1]), to_fixed(s[2])};
-    const long long area2 = edge_function_fixed(f[0], f[1], f[2].x, f[2].y);
-    if (area2 == 0) continue;
-    const long long orient = area2 > 0 ? 1 : -1;
-    const int xs = std::max(roi.x0, static_cast<int>(std::ceil(std::min({s[0].x, s[1].x, s[2].x}))));
-    const int xe = std::min(roi.x1 - 1, static_cast<int>(std::floor(std::max({s[0].x, s[1].x, s[2].x}))));
-    const int ys = std::max(roi.y0, static_cast<int>(std::ceil(std::min({s[0].y, s[1].y, s[2].y}))));
-    const int ye = std::min(roi.y1 - 1, static_cast<int>(std::floor(std::max({s[0].y, s[1].y, s[2].y}))));
+    const float z[3] = {ws.cam[v[0]].z, ws.cam[v[1]].z, ws.cam[v[2]].z};
+    TriangleRaster R;
+    if (!triangle_raster_setup(s, z, &R)) continue;
+    const int xs = std::max(roi.x0, R.x0), xe = std::min(roi.x1 - 1, R.x1);
+    const int ys = std::max(roi.y0, R.y0), ye = std::min(roi.y1 - 1, R.y1);
     if (xs > xe || ys > ye) continue;
-    const float inv2a = 1.f / static_cast<float>(orient * area2);
-    // Edge k (s_k -> s_k+1) weighs the opposite vertex k+2.
-    const float iz[3] = {1.f / ws.cam[v[2]].z, 1.f / ws.cam[v[0]].z, 1.f / ws.cam[v[1]].z};
-    bool top_left[3];
-    long long dx[3];
-    for (int k = 0; k < 3; ++k) {
-      top_left[k] = edge_is_top_left_fixed(f[k], f[(k + 1) % 3], orient);
-      dx[k] = -orient * (f[(k + 1) % 3].y - f[k].y) * kOne;  // edge change per pixel step in x
-    }
     for (int y = ys; y <= ye; ++y) {
       long long e[3];
-      for (int k = 0; k < 3; ++k) e[k] = orient * edge_function_fixed(f[k], f[(k + 1) % 3], xs * kOne, y * kOne);
+      raster_edges_at(R, xs, y, e);
       // Wide triangles: start and stop the row at the triangle's span (exact integer division).
       int lo = xs, hi = xe;
       if (xe - xs > 8) {
         for (int k = 0; k < 3; ++k) {
-          if (dx[k] > 0 && e[k] < 0) lo = std::max(lo, xs + static_cast<int>((-e[k] + dx[k] - 1) / dx[k]));
-          else if (dx[k] < 0 && e[k] >= 0) hi = std::min(hi, xs + static_cast<int>(e[k] / -dx[k]));
-          else if (dx[k] < 0 && e[k] < 0) hi = xs - 1;
+          if (R.dx[k] > 0 && e[k] < 0) lo = std::max(lo, xs + static_cast<int>((-e[k] + R.dx[k] - 1) / R.dx[k]));
+          else if (R.dx[k] < 0 && e[k] >= 0) hi = std::min(hi, xs + static_cast<int>(e[k] / -R.dx[k]));
+          else if (R.dx[k] < 0 && e[k] < 0) hi = xs - 1;
         }
         if (lo > hi) continue;
-        for (int k = 0; k < 3; ++k) e[k] += dx[k] * (lo - xs);
+        for (int k = 0; k < 3; ++k) e[k] += R.dx[k] * (lo - xs);
       }
       float* zrow = ws.zbuf.data() + (y - roi.y0) * W - roi.x0;
       int* trow = ws.tri.data() + (y - roi.y0) * W - roi.x0;
-      for (int x = lo; x <= hi; ++x, e[0] += dx[0], e[1] += dx[1], e[2] += dx[2]) {
-        bool inside = true;
-        for (int k = 0; k < 3; ++k) inside &= e[k] > 0 || (e[k] == 0 && top_left[k]);
-        if (!inside) continue;
-        const float z = 1.f / ((float(e[0]) * iz[0] + float(e[1]) * iz[1] + float(e[2]) * iz[2]) * inv2a);
-        if (z < zrow[x]) {
-          zrow[x] = z;
+      for (int x = lo; x <= hi; ++x, e[0] += R.dx[0], e[1] += R.dx[1], e[2] += R.dx[2]) {
+        if (!raster_inside(R, e)) continue;
+        const float zp = raster_depth(R, e);
+        if (zp < zrow[x]) {
+          zrow[x] = zp;
           trow[x] = t;
         }
       }
@@ -283,30 +244,9 @@ void CpuRenderer::evaluate(const Camera& camera, const Mesh& mesh, const Observa
   if (!(loss.depth_truncation > 0)) throw std::invalid_argument("loss: depth_truncation must be > 0");
   const CallContext ctx = make_context(camera, mesh, obs.mask, true);
 
-  // Normalisers: each term is a mean over the pixels it is defined on (whole image, not the ROI, so that the
-  // value does not depend on the region of interest).
-  double n_rgb = 0, n_depth = 0;
-  if (obs.has_mask()) {
-    n_rgb = cv::sum(obs.mask)[0];
-    if (obs.has_depth()) {
-      cv::Mat valid;
-      cv::compare(obs.depth, 0.0, valid, cv::CMP_GT);
-      valid.convertTo(valid, CV_32F, 1.0 / 255.0);
-      n_depth = cv::sum(valid.mul(obs.mask))[0];
-    }
-  } else {
-    n_rgb = static_cast<double>(camera.width) * camera.height;
-    if (obs.has_depth()) n_depth = cv::countNonZero(obs.depth > 0);
-  }
-  PixelLossParams P;
-  P.k_rgb = (obs.has_rgb() && n_rgb > 0) ? static_cast<float>(loss.weight_rgb / n_rgb) : 0.f;
-  P.k_depth = (obs.has_depth() && n_depth > 0) ? static_cast<float>(loss.weight_depth / n_depth) : 0.f;
-  P.k_mask = (obs.has_mask() && n_rgb > 0) ? static_cast<float>(loss.weight_mask / n_rgb) : 0.f;
-  P.rgb_miss = static_cast<float>(loss.rgb_miss);
-  P.depth_trunc = static_cast<float>(loss.depth_truncation);
-  P.occlusion_margin = static_cast<float>(loss.occlusion_margin);
-  const float k_edges = (obs.has_edges() && n_rgb > 0) ? static_cast<float>(loss.weight_edges / n_rgb) : 0.f;
-  const float edge_scale = static_cast<float>(loss.edge_scale);
+  const LossSetup setup = make_loss_setup(camera, obs, loss);
+  const PixelLossParams& P = setup.P;
+  const float k_edges = setup.k_edges, edge_scale = setup.edge_scale;
 
   out.assign(poses.size(), LossValue());
   pool_.parallel_for(static_cast<int>(poses.size()), [&](int h, int worker) {
@@ -377,11 +317,7 @@ void CpuRenderer::evaluate(const Camera& camera, const Mesh& mesh, const Observa
             for (int ch = 0; ch < 3; ++ch) ws.g_post[ly * W + lx].c[ch] += g;
           }
     }
-    res.edges = n_rgb > 0 && k_edges != 0.f ? sum_edges / n_rgb : 0.0;
-    res.rgb = n_rgb > 0 && obs.has_rgb() ? sum_rgb / n_rgb : 0.0;
-    res.depth = n_depth > 0 ? sum_depth / n_depth : 0.0;
-    res.mask = n_rgb > 0 && obs.has_mask() ? sum_mask / n_rgb : 0.0;
-    res.total = P.k_rgb * sum_rgb + P.k_depth * sum_depth + P.k_mask * sum_mask + k_edges * sum_edges;
+    finish_loss(setup, sum_rgb, sum_depth, sum_mask, sum_edges, &res);
     if (!with_gradient) return;
 
     double grad[6] = {0, 0, 0, 0, 0, 0};

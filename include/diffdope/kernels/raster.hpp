@@ -40,6 +40,57 @@ DD_HOST_DEVICE bool edge_is_top_left_fixed(FixedPoint2 a, FixedPoint2 b, long lo
   return (ey == 0 && ex > 0) || ey < 0;
 }
 
+/// Per-triangle set-up of the watertight z-buffer raster, shared by the CPU loop and the CUDA kernel so that
+/// both decide coverage and depth bit for bit alike.
+struct TriangleRaster {
+  FixedPoint2 f[3];     // vertices in fixed point
+  long long orient;     // sign of the fixed-point area
+  long long dx[3];      // change of edge function k per pixel step in x (fixed-point units)
+  bool top_left[3];     // fill rule of edge k (v_k -> v_k+1)
+  float inv2a;          // 1 / |2 area| (fixed-point units)
+  float iz[3];          // 1/z of the vertex edge k weighs (edge k weighs vertex k+2): depth is linear in 1/z
+  int x0, x1, y0, y1;   // pixel bounding box (inclusive, not clipped to the image)
+};
+
+/// s: pixel positions, z: camera depths of the three vertices. False when the triangle has no fixed-point area.
+DD_HOST_DEVICE bool triangle_raster_setup(const Vec2f s[3], const float z[3], TriangleRaster* r) {
+  constexpr long long kOne = 1LL << kSubpixelBits;
+  for (int k = 0; k < 3; ++k) r->f[k] = to_fixed(s[k]);
+  const long long area2 = edge_function_fixed(r->f[0], r->f[1], r->f[2].x, r->f[2].y);
+  if (area2 == 0) return false;
+  r->orient = area2 > 0 ? 1 : -1;
+  r->inv2a = 1.f / static_cast<float>(r->orient * area2);
+  r->iz[0] = 1.f / z[2];
+  r->iz[1] = 1.f / z[0];
+  r->iz[2] = 1.f / z[1];
+  for (int k = 0; k < 3; ++k) {
+    r->top_left[k] = edge_is_top_left_fixed(r->f[k], r->f[(k + 1) % 3], r->orient);
+    r->dx[k] = -r->orient * (r->f[(k + 1) % 3].y - r->f[k].y) * kOne;
+  }
+  r->x0 = static_cast<int>(ceilf(fminf(fminf(s[0].x, s[1].x), s[2].x)));
+  r->x1 = static_cast<int>(floorf(fmaxf(fmaxf(s[0].x, s[1].x), s[2].x)));
+  r->y0 = static_cast<int>(ceilf(fminf(fminf(s[0].y, s[1].y), s[2].y)));
+  r->y1 = static_cast<int>(floorf(fmaxf(fmaxf(s[0].y, s[1].y), s[2].y)));
+  return true;
+}
+
+/// The three (orientation-corrected) edge functions at pixel centre (x, y), exact integers.
+DD_HOST_DEVICE void raster_edges_at(const TriangleRaster& r, int x, int y, long long e[3]) {
+  constexpr long long kOne = 1LL << kSubpixelBits;
+  for (int k = 0; k < 3; ++k) e[k] = r.orient * edge_function_fixed(r.f[k], r.f[(k + 1) % 3], x * kOne, y * kOne);
+}
+
+DD_HOST_DEVICE bool raster_inside(const TriangleRaster& r, const long long e[3]) {
+  bool inside = true;
+  for (int k = 0; k < 3; ++k) inside &= e[k] > 0 || (e[k] == 0 && r.top_left[k]);
+  return inside;
+}
+
+/// Camera depth at the pixel whose edge functions are e (1/z interpolated linearly in the image).
+DD_HOST_DEVICE float raster_depth(const TriangleRaster& r, const long long e[3]) {
+  return 1.f / ((float(e[0]) * r.iz[0] + float(e[1]) * r.iz[1] + float(e[2]) * r.iz[2]) * r.inv2a);
+}
+
 /// Perspective-correct barycentrics of the intersection of viewing ray d with the camera-space triangle
 /// (X0, X1, X2). c_i = d . (X_j x X_k) is proportional to the volume spanned by d and the opposite edge,
 /// so b_i = c_i / sum(c) are exactly the 3-D barycentrics of the hit point. Returns sum(c) (0: edge-on).
