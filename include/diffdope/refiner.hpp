@@ -52,7 +52,10 @@ struct RefinerOptions {
   double min_mask_iou = 0.5;
   double min_depth_inliers = 0.5;
   RenderOptions render;  // back-face culling, near plane, threads
-  std::string device = "cpu";  // cpu (cuda: see issue tracker)
+  /// Backend: cpu, cuda (an error without a device) or auto (CUDA when a device is present, else the CPU with
+  /// one line on stderr). Default cpu: the CUDA backend shares the CPU's maths but has not yet been run on a
+  /// GPU by this project (README, "CUDA backend").
+  std::string device = "cpu";
 
   /// Overrides fields present in a YAML file / string; unknown keys are an error (typos must not pass
   /// silently). Throws std::runtime_error naming the file and key.
@@ -101,6 +104,8 @@ class Refiner {
  public:
   explicit Refiner(const RefinerOptions& options = RefinerOptions());
   const RefinerOptions& options() const { return options_; }
+  /// The backend in use ("cpu" or "cuda").
+  std::string backend() const { return renderer_->name(); }
 
   /// Refines one object. `observed` holds the full-resolution images (any of rgb / depth / mask may be
   /// empty; at least one of rgb or depth is needed), `camera` their intrinsics. Throws std::invalid_argument

@@ -126,6 +126,7 @@ class RefinerNodelet : public nodelet::Nodelet {
   std::string frame_prefix_, fixed_frame_, detection_prefix_;
   diffdope::TrackOptions track_options_;
   diffdope::RefinerOptions refiner_options_;
+  std::unique_ptr<diffdope::Refiner> refiner_;  // the worker's (null after a configuration error)
 
   ErrorReporter errors_;
   std::vector<std::unique_ptr<Slot>> slots_;

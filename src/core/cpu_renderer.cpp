@@ -91,14 +91,7 @@ CallContext CpuRenderer::make_context(const Camera& camera, const Mesh& mesh, co
   ctx.margin = std::max(1, options_.roi_margin);
   ctx.camera = camera;
   ctx.source_mesh = &mesh;
-  if (mask.empty()) {
-    if (no_mask_means_everywhere) ctx.mask_box = {0, 0, camera.width, camera.height};  // S = 1 everywhere
-  } else {
-    cv::Mat nz;
-    cv::compare(mask, 0.0, nz, cv::CMP_GT);
-    const cv::Rect r = cv::boundingRect(nz);
-    ctx.mask_box = {r.x, r.y, r.x + r.width, r.y + r.height};
-  }
+  ctx.mask_box = mask_box(mask, camera.width, camera.height, no_mask_means_everywhere);
   return ctx;
 }
 

@@ -2,6 +2,7 @@
 // Per-hypothesis region of interest, shared by the CPU and CUDA backends (internal header).
 #include <algorithm>
 #include <cmath>
+#include <opencv2/imgproc.hpp>
 
 #include "diffdope/camera.hpp"
 #include "diffdope/mesh.hpp"
@@ -21,6 +22,16 @@ inline PixelRect unite(const PixelRect& a, const PixelRect& b) {
   if (a.empty()) return b;
   if (b.empty()) return a;
   return {std::min(a.x0, b.x0), std::min(a.y0, b.y0), std::max(a.x1, b.x1), std::max(a.y1, b.y1)};
+}
+
+/// Bounding box of the observed mask's nonzero pixels; the whole image when there is no mask and S is then
+/// implicitly 1 everywhere (`no_mask_means_everywhere`), else empty.
+inline PixelRect mask_box(const cv::Mat& mask, int width, int height, bool no_mask_means_everywhere) {
+  if (mask.empty()) return no_mask_means_everywhere ? PixelRect{0, 0, width, height} : PixelRect{};
+  cv::Mat nz;
+  cv::compare(mask, 0.0, nz, cv::CMP_GT);
+  const cv::Rect r = cv::boundingRect(nz);
+  return {r.x, r.y, r.x + r.width, r.y + r.height};
 }
 
 /// The pixels a hypothesis can touch: the projected model box united with the observed mask's box, plus a

@@ -1,6 +1,11 @@
 // Algorithm 1 of Diff-DOPE with learning-rate randomisation, on top of the renderer backend.
 #include "diffdope/refiner.hpp"
 
+#include <cstdio>
+#include <mutex>
+
+#include "diffdope/device.hpp"
+
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -26,9 +31,10 @@ Pose refiner_step(const Pose& pose, const Vector6d& g, double lr, double diamete
 
 Refiner::Refiner(const RefinerOptions& options) : options_(options) {
   options_.validate();
-  if (options_.device != "cpu" && options_.device != "auto")
-    throw std::invalid_argument("refiner: device '" + options_.device + "' is not available in this build (use cpu)");
-  renderer_ = make_cpu_renderer(options_.render);
+  std::string note;
+  renderer_ = make_renderer(options_.device, options_.render, &note);  // "cuda" without a device throws
+  static std::once_flag said;  // the auto fallback is said once per process, not per Refiner
+  if (!note.empty()) std::call_once(said, [&] { std::fprintf(stderr, "diffdope: %s\n", note.c_str()); });
 }
 
 namespace {

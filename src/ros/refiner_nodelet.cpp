@@ -57,7 +57,8 @@ void RefinerNodelet::onInit() {
                       << (mode_ == Mode::kOnRequest ? "on_request" : mode_ == Mode::kTracking ? "tracking" : "continuous")
                       << ", inputs rgb" << (use_depth_ ? "+depth" : "") << (use_mask_ ? "+mask" : "")
                       << ", " << slots_.size() << " object(s), " << refiner_options_.batch_size << " runs x "
-                      << refiner_options_.iterations << " iterations");
+                      << refiner_options_.iterations << " iterations, backend "
+                      << (refiner_ ? refiner_->backend() : std::string("none")));
 }
 
 void RefinerNodelet::loadParameters() {
@@ -104,7 +105,12 @@ void RefinerNodelet::loadObjects() {
     if (!refiner_path.empty()) refiner_options_ = diffdope::RefinerOptions::from_yaml_file(refiner_path, cfg.refiner);
     if (pnh.hasParam("iterations")) refiner_options_.iterations = pnh.param("iterations", refiner_options_.iterations);
     if (pnh.hasParam("batch_size")) refiner_options_.batch_size = pnh.param("batch_size", refiner_options_.batch_size);
+    const std::string device = pnh.param<std::string>("device", "");  // "" = the YAML's choice
+    if (!device.empty()) refiner_options_.device = device;
     refiner_options_.validate();
+    // One refiner (and renderer: CUDA keeps the meshes on the device) for the node's life; "cuda" without a
+    // device throws here, "auto" falls back to the CPU with one line.
+    refiner_ = std::make_unique<diffdope::Refiner>(refiner_options_);
   } catch (const std::exception& e) {
     errors_.error("config", std::string("configuration error, no object will be refined: ") + e.what());
     return;
@@ -359,6 +365,7 @@ void RefinerNodelet::onDiagnostics(diagnostic_updater::DiagnosticStatusWrapper& 
   else if (recent_error) stat.summary(diagnostic_msgs::DiagnosticStatus::WARN, e.last_error);
   else stat.summary(diagnostic_msgs::DiagnosticStatus::OK, "refining");
   stat.add("objects enabled", std::to_string(enabled) + " of " + std::to_string(slots_.size()));
+  stat.add("backend", refiner_ ? refiner_->backend() : std::string("none (configuration error)"));
   for (const auto& slot : slots_)
     stat.add("object " + slot->config.name,
              slot->mesh ? (slot->tracking ? "tracking" : "waiting for a pose") : "disabled: " + slot->disabled_reason);
@@ -591,7 +598,11 @@ std::vector<diffdope_ros::RefinedPose> RefinerNodelet::refineAndPublish(
     for (const auto& [i, starts] : seeds) slots_[i]->tracking = slots_[i]->track.tracking();
     return out;
   }
-  diffdope::Refiner refiner(options);
+  // Per-call overrides (service) get their own refiner; streaming reuses the node's.
+  std::unique_ptr<diffdope::Refiner> custom;
+  if (options.iterations != refiner_options_.iterations || options.batch_size != refiner_options_.batch_size)
+    custom = std::make_unique<diffdope::Refiner>(options);
+  diffdope::Refiner& refiner = custom ? *custom : *refiner_;
   std::vector<diffdope::RefineResult> results = refiner.refine_all(frame.camera, frame.observation, targets);
 
   diffdope_ros::RefinedPoseArray array;

@@ -31,7 +31,7 @@ namespace {
 int usage(int rc) {
   std::cerr << "usage: diffdope_eval --bop ROOT --split NAME --perturbations DIR --out results.jsonl\n"
                "                     [--levels easy,medium,hard] [--config FILE] [--summary-json FILE]\n"
-               "                     [--threads N] [--max-samples N] [--generate N [--seed S]]\n";
+               "                     [--threads N] [--max-samples N] [--generate N [--seed S]] [--device auto|cpu|cuda]\n";
   return rc;
 }
 
@@ -88,7 +88,7 @@ void write_perturbations(BopDataset& data, const std::string& dir, int samples, 
 }  // namespace
 
 int main(int argc, char** argv) {
-  std::string root, split, pert_dir, out_path, config, summary_path;
+  std::string root, split, pert_dir, out_path, config, summary_path, device;
   std::set<std::string> levels;
   int threads = 0, max_samples = -1, generate = 0;
   uint64_t seed = 1;
@@ -107,6 +107,7 @@ int main(int argc, char** argv) {
     else if (a == "--config") config = v;
     else if (a == "--summary-json") summary_path = v;
     else if (a == "--threads") threads = std::stoi(v);
+    else if (a == "--device") device = v;
     else if (a == "--max-samples") max_samples = std::stoi(v);
     else if (a == "--generate") generate = std::stoi(v);
     else if (a == "--seed") seed = std::stoull(v);
@@ -123,7 +124,10 @@ int main(int argc, char** argv) {
   try {
     RefinerOptions options = config.empty() ? RefinerOptions() : RefinerOptions::from_yaml_file(config);
     if (threads > 0) options.render.threads = threads;
+    if (!device.empty()) options.device = device;
+    options.validate();
     Refiner refiner(options);
+    std::cerr << "diffdope_eval: backend " << refiner.backend() << "\n";
     BopDataset data(root, split);
     if (generate > 0) write_perturbations(data, pert_dir, generate, seed);
     std::ofstream out(out_path);

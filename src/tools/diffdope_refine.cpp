@@ -35,7 +35,8 @@ namespace {
 
 const char* kUsage =
     "usage: diffdope_refine --rgb FILE --camera FILE --mesh FILE --init FILE --out DIR\n"
-    "                       [--depth FILE] [--depth-scale M] [--mask FILE] [--mesh-scale S] [--config FILE] [--quiet]\n"
+    "                       [--depth FILE] [--depth-scale M] [--mask FILE] [--mesh-scale S] [--config FILE]\n"
+    "                       [--device auto|cpu|cuda] [--quiet]\n"
     "\n"
     "  --rgb FILE        colour or grey image (8/16-bit, anything OpenCV reads)\n"
     "  --camera FILE     intrinsics of the (rectified) image, .json or .yaml/.yml: fx, fy, cx, cy[, width, height],\n"
@@ -49,6 +50,7 @@ const char* kUsage =
     "  --mask FILE       object mask, nonzero = object\n"
     "  --mesh-scale S    metres per model unit (default 1; 0.001 for millimetre models such as BOP's)\n"
     "  --config FILE     refiner options YAML (see config/default.yaml)\n"
+    "  --device D        backend: cpu, cuda (error without a GPU) or auto (CUDA if present); overrides --config\n"
     "  --quiet           no progress bar and no summary on stdout\n";
 
 /// An input that cannot be used: `file` is the file (or folder) to name in the message.
@@ -572,7 +574,7 @@ nlohmann::ordered_json pose_json(const RefineResult& r) {
 }
 
 struct Args {
-  std::string rgb, depth, mask, camera, mesh, init, out, config;
+  std::string rgb, depth, mask, camera, mesh, init, out, config, device;
   double depth_scale = 0.001, mesh_scale = 1.0;
   bool quiet = false;
 };
@@ -605,6 +607,7 @@ int parse_args(int argc, char** argv, Args& a) {
     else if (k == "--init") target = &a.init;
     else if (k == "--out") target = &a.out;
     else if (k == "--config") target = &a.config;
+    else if (k == "--device") target = &a.device;
     else if (k == "--depth-scale") num = &a.depth_scale;
     else if (k == "--mesh-scale") num = &a.mesh_scale;
     else return usage_error("unknown option " + k);
@@ -642,6 +645,10 @@ int run(const Args& a) {
     check_file(a.config);
     options = about(a.config, [&] { return RefinerOptions::from_yaml_file(a.config); });
     about(a.config, [&] { options.validate(); });
+  }
+  if (!a.device.empty()) {
+    options.device = a.device;
+    about("--device", [&] { options.validate(); });
   }
 
   Observation obs;

@@ -2,6 +2,8 @@
 // synthetic scene saved as 8-bit rgb / 16-bit mm depth / 8-bit mask PNGs, camera and initial pose in the formats
 // the tool reads), the tool started with std::system, its outputs and error reports checked.
 #include <gtest/gtest.h>
+
+#include "diffdope/device.hpp"
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -415,6 +417,24 @@ TEST_F(RefineCliTest, MeshAndConfigErrors) {
   expect_error(run(args("err_scale", {{"--mesh-scale", "<drop>"}}), "mesh_scale"), f("box.ply"), "--mesh-scale");
   write_text(dir / "typo.yaml", "batch_sise: 4\n");
   expect_error(run(args("err_cfg", {{"--config", f("typo.yaml")}}), "cfg_typo"), f("typo.yaml"), "batch_sise");
+}
+
+TEST_F(RefineCliTest, DeviceFlag) {
+  // auto runs everywhere (CUDA if present, else the CPU with one line on stderr); cuda without a device is a
+  // one-line error, not a crash; an unknown device names the choices.
+  const RunResult r = run(args("out_auto", {{"--device", "auto"}, {"--quiet", ""}}), "device_auto");
+  ASSERT_EQ(r.rc, 0) << r.err;
+  const CudaDeviceInfo info = cuda_device_info();
+  if (!info.available) EXPECT_NE(r.err.find("using the CPU backend"), std::string::npos) << r.err;
+  const RunResult c = run(args("out_cuda", {{"--device", "cuda"}, {"--quiet", ""}}), "device_cuda");
+  if (info.available) {
+    EXPECT_EQ(c.rc, 0) << c.err;
+  } else {
+    EXPECT_EQ(c.rc, 1) << c.err;
+    EXPECT_NE(c.err.find("unavailable"), std::string::npos) << c.err;
+    EXPECT_EQ(count_lines(c.err), 1) << c.err;
+  }
+  expect_error(run(args("err_dev", {{"--device", "gpu"}}), "device_gpu"), "--device", "auto, cpu or cuda");
 }
 
 // ---- Usage errors: exit code 2 ----

@@ -1,0 +1,165 @@
+// The CUDA backend against the CPU backend (renders, losses, gradients, refined poses) and against finite
+// differences, plus device selection. Without a CUDA device the equivalence tests are reported as SKIPPED with
+// the reason; the selection tests run everywhere (they check the fallback and the errors).
+#include <gtest/gtest.h>
+
+#include "diffdope/device.hpp"
+#include "diffdope/refiner.hpp"
+#include "diffdope/synthetic.hpp"
+#include "test_scenes.hpp"
+
+using namespace diffdope;
+using namespace diffdope::test;
+
+namespace {
+
+#define REQUIRE_CUDA()                                                                   \
+  do {                                                                                   \
+    const CudaDeviceInfo info = cuda_device_info();                                      \
+    if (!info.available) GTEST_SKIP() << "no CUDA device: " << info.reason;              \
+  } while (0)
+
+struct Case {
+  const char* name;
+  Mesh mesh;
+  Pose truth, test;
+};
+
+std::vector<Case> cases() {
+  std::vector<Case> c;
+  c.push_back({"box", make_box(Eigen::Vector3d(0.10, 0.06, 0.14), make_label_texture(256, 3)),
+               look_pose(0.4, -0.5, 0.2, 0.01, -0.005, 0.5), look_pose(0.43, -0.47, 0.22, 0.013, -0.002, 0.505)});
+  c.push_back({"lblock", make_l_block(0.12, make_label_texture(256, 5)), look_pose(0.9, 0.3, -0.4, 0.0, 0.01, 0.55),
+               look_pose(0.87, 0.34, -0.42, 0.004, 0.012, 0.545)});
+  c.push_back({"sphere", make_uv_sphere(0.06, 48, 24, make_pattern_texture(256, 7)),
+               look_pose(0.2, 0.1, 0.3, -0.01, 0.0, 0.45), look_pose(0.25, 0.12, 0.28, -0.006, 0.004, 0.46)});
+  return c;
+}
+
+double max_abs_diff(const cv::Mat& a, const cv::Mat& b) { return cv::norm(a, b, cv::NORM_INF); }
+
+}  // namespace
+
+TEST(DeviceSelection, AutoFallsBackCudaFailsClearly) {
+  const CudaDeviceInfo info = cuda_device_info();
+  std::string note;
+  auto r = make_renderer("auto", {}, &note);
+  if (info.available) {
+    EXPECT_EQ(r->name(), "cuda");
+  } else {
+    EXPECT_EQ(r->name(), "cpu");
+    EXPECT_NE(note.find("using the CPU backend"), std::string::npos) << note;
+    EXPECT_NE(note.find(info.reason), std::string::npos) << note;
+    try {
+      make_renderer("cuda");
+      ADD_FAILURE() << "device cuda without a device must throw";
+    } catch (const std::runtime_error& e) {
+      EXPECT_NE(std::string(e.what()).find("unavailable"), std::string::npos) << e.what();
+    }
+    RefinerOptions o;
+    o.device = "cuda";
+    EXPECT_THROW(Refiner{o}, std::runtime_error);
+    o.device = "auto";
+    EXPECT_EQ(Refiner(o).backend(), "cpu");
+  }
+  EXPECT_EQ(make_renderer("cpu")->name(), "cpu");
+  EXPECT_THROW(make_renderer("gpu"), std::invalid_argument);
+  RefinerOptions bad;
+  bad.device = "gpu";
+  EXPECT_THROW(bad.validate(), std::invalid_argument);
+}
+
+TEST(CudaBackend, RendersLikeTheCpu) {
+  REQUIRE_CUDA();
+  const Camera cam = test_camera();
+  auto cpu = make_cpu_renderer();
+  auto gpu = make_cuda_renderer();
+  for (const Case& c : cases()) {
+    const auto a = cpu->render(cam, c.mesh, {c.truth, c.test});
+    const auto b = gpu->render(cam, c.mesh, {c.truth, c.test});
+    for (size_t h = 0; h < a.size(); ++h) {
+      EXPECT_EQ(cv::countNonZero(a[h].triangle != b[h].triangle), 0) << c.name << ": visible triangles differ";
+      EXPECT_LT(max_abs_diff(a[h].coverage, b[h].coverage), 1e-4) << c.name;
+      EXPECT_LT(max_abs_diff(a[h].color, b[h].color), 1e-4) << c.name;
+      EXPECT_LT(max_abs_diff(a[h].depth, b[h].depth), 1e-5) << c.name;
+    }
+  }
+}
+
+TEST(CudaBackend, LossesAndGradientsMatchTheCpu) {
+  REQUIRE_CUDA();
+  const Camera cam = test_camera();
+  auto cpu = make_cpu_renderer();
+  auto gpu = make_cuda_renderer();
+  for (const Case& c : cases()) {
+    const Observation obs = observe(*cpu, cam, c.mesh, c.truth);
+    for (bool with_mask : {true, false}) {
+      Observation o = obs;
+      if (!with_mask) o.mask = cv::Mat();
+      std::vector<LossValue> a, b;
+      const std::vector<Pose> poses = {c.test, c.truth, c.test.updated((Vector6d() << 0.01, 0, 0, 0, 0.1, 0).finished())};
+      cpu->evaluate(cam, c.mesh, o, poses, LossOptions(), true, a);
+      gpu->evaluate(cam, c.mesh, o, poses, LossOptions(), true, b);
+      for (size_t h = 0; h < poses.size(); ++h) {
+        SCOPED_TRACE(std::string(c.name) + (with_mask ? " mask" : " no mask") + " pose " + std::to_string(h));
+        EXPECT_NEAR(a[h].total, b[h].total, 1e-5 * std::max(1.0, std::abs(a[h].total)));
+        EXPECT_NEAR(a[h].rgb, b[h].rgb, 1e-5);
+        EXPECT_NEAR(a[h].depth, b[h].depth, 1e-5);
+        EXPECT_NEAR(a[h].mask, b[h].mask, 1e-5);
+        const double n = std::max(a[h].gradient.norm(), 1e-9);
+        EXPECT_LT((a[h].gradient - b[h].gradient).norm() / n, 1e-3)
+            << "cpu " << a[h].gradient.transpose() << "\ncuda " << b[h].gradient.transpose();
+      }
+    }
+  }
+}
+
+TEST(CudaBackend, GradientMatchesFiniteDifferences) {
+  REQUIRE_CUDA();
+  const Camera cam = test_camera();
+  auto gpu = make_cuda_renderer();
+  for (const Case& c : cases()) {
+    const Observation obs = observe(*gpu, cam, c.mesh, c.truth);
+    std::vector<LossValue> v;
+    gpu->evaluate(cam, c.mesh, obs, {c.test}, LossOptions(), true, v);
+    const Vector6d fd = finite_difference(*gpu, cam, c.mesh, obs, c.test, LossOptions(), 1e-4, 2.5e-4);
+    const double cosine = v[0].gradient.dot(fd) / (v[0].gradient.norm() * fd.norm());
+    EXPECT_GT(cosine, 0.99) << c.name << "\n analytic " << v[0].gradient.transpose() << "\n finite   " << fd.transpose();
+  }
+}
+
+TEST(CudaBackend, RefinesLikeTheCpu) {
+  REQUIRE_CUDA();
+  const Camera cam(420, 420, 159.5, 119.5, 320, 240);
+  const Mesh mesh = make_l_block(0.12, make_label_texture(256, 31));
+  const Pose truth = look_pose(0.7, -0.4, 0.3, 0.01, -0.01, 0.55);
+  auto r = make_cpu_renderer();
+  const Observation obs = synthesize_observation(*r, cam, mesh, truth, SyntheticNoise(), 4);
+  std::mt19937_64 rng(5);
+  const Pose init = perturb_pose(truth, mesh.center(), 10 * M_PI / 180, 0.01, rng);
+  RefinerOptions o;
+  o.batch_size = 16;
+  o.iterations = 40;
+  o.image_scale = 1.0;
+  const RefineResult a = Refiner(o).refine(cam, obs, mesh, init);
+  o.device = "cuda";
+  Refiner gpu_refiner(o);
+  EXPECT_EQ(gpu_refiner.backend(), "cuda");
+  const RefineResult b = gpu_refiner.refine(cam, obs, mesh, init);
+  EXPECT_LT((a.pose.t - b.pose.t).norm(), 1e-4);
+  EXPECT_LT(rotation_angle(a.pose.R, b.pose.R), 0.05 * M_PI / 180);
+  EXPECT_NEAR(a.loss.total, b.loss.total, 1e-3 * a.loss.total);
+}
+
+TEST(CudaBackend, EdgeTermIsRefusedClearly) {
+  REQUIRE_CUDA();
+  const Camera cam = test_camera();
+  const Case c = cases()[0];
+  auto gpu = make_cuda_renderer();
+  Observation obs = observe(*gpu, cam, c.mesh, c.truth);
+  obs.edges = observed_edges(obs.rgb);
+  LossOptions loss;
+  loss.weight_edges = 1.0;
+  std::vector<LossValue> v;
+  EXPECT_THROW(gpu->evaluate(cam, c.mesh, obs, {c.test}, loss, true, v), std::invalid_argument);
+}
