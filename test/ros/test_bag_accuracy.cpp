@@ -155,7 +155,7 @@ TEST(BagAccuracy, RefinedPosesTfAndScores) {
       else EXPECT_EQ(p.depth_inliers, -1.0);
       EXPECT_GT(p.iterations, 0);
       EXPECT_GT(p.time_ms, 0.0);
-      EXPECT_LT(p.loss, p.initial_loss);
+      EXPECT_LE(p.loss, p.initial_loss);  // the best pose seen: the start itself when already optimal
       EXPECT_TRUE(p.source == "detector" || p.source == "track" || p.source == "prediction") << p.source;
       if (!p.plausible) continue;
       const auto t = tf_buffer.lookupTransform(a.header.frame_id, "diffdope_" + p.name, a.header.stamp);
