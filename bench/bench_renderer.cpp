@@ -1,10 +1,12 @@
 // Renderer benchmark: B = 32 hypotheses of a ~14k-triangle textured mesh covering ~10k pixels, at 320x240 and
-// 640x480. Reports forward (loss only) and forward + gradient time per call and per hypothesis.
+// 640x480 (and 960x540, the CUDA target size). Reports forward (loss only) and forward + gradient time
+// per call and per hypothesis, on the CPU and (BM_Cuda*, skipped with the reason when there is no device) CUDA.
 //   build-core/bin/bench_renderer [--benchmark_filter=...]
 #include <benchmark/benchmark.h>
 
 #include <random>
 
+#include "diffdope/device.hpp"
 #include "diffdope/procedural.hpp"
 #include "diffdope/renderer.hpp"
 
@@ -22,7 +24,8 @@ struct Scene {
 Scene make_scene(int width, int batch) {
   Scene s;
   const double f = 300.0 * width / 320.0;
-  s.cam = Camera(f, f, width / 2.0 - 0.5, width * 0.375 - 0.5, width, width * 3 / 4);
+  const int height = width == 960 ? 540 : width * 3 / 4;
+  s.cam = Camera(f, f, width / 2.0 - 0.5, height / 2.0 - 0.5, width, height);
   s.mesh = make_uv_sphere(0.05, 60, 120, make_label_texture(512, 7));  // 14,400 triangles
   // Distance chosen so the sphere covers ~10,000 pixels: pi * (f r / z)^2 = 1e4.
   const double z = f * 0.05 / std::sqrt(1e4 / M_PI);
@@ -45,12 +48,16 @@ Scene make_scene(int width, int batch) {
   return s;
 }
 
-void run(benchmark::State& state, bool gradient, bool cull) {
+void run(benchmark::State& state, bool gradient, bool cull, bool cuda = false) {
+  if (cuda && !cuda_device_info().available) {
+    state.SkipWithError(("no CUDA device: " + cuda_device_info().reason).c_str());
+    return;
+  }
   const int width = static_cast<int>(state.range(0));
   const Scene s = make_scene(width, 32);
   RenderOptions ro;
   ro.cull_back_faces = cull;
-  auto r = make_cpu_renderer(ro);
+  auto r = cuda ? make_cuda_renderer(ro) : make_cpu_renderer(ro);
   std::vector<LossValue> out;
   for (auto _ : state) {
     r->evaluate(s.cam, s.mesh, s.obs, s.poses, LossOptions(), gradient, out);
@@ -67,10 +74,14 @@ void run(benchmark::State& state, bool gradient, bool cull) {
 void BM_Forward(benchmark::State& st) { run(st, false, false); }
 void BM_ForwardGradient(benchmark::State& st) { run(st, true, false); }
 void BM_ForwardGradientCulled(benchmark::State& st) { run(st, true, true); }
+void BM_CudaForward(benchmark::State& st) { run(st, false, false, true); }
+void BM_CudaForwardGradient(benchmark::State& st) { run(st, true, false, true); }
 
 }  // namespace
 
 BENCHMARK(BM_Forward)->Arg(320)->Arg(640)->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK(BM_ForwardGradient)->Arg(320)->Arg(640)->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK(BM_ForwardGradientCulled)->Arg(320)->Arg(640)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_CudaForward)->Arg(320)->Arg(640)->Arg(960)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_CudaForwardGradient)->Arg(320)->Arg(640)->Arg(960)->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK_MAIN();

@@ -6,7 +6,8 @@
 //
 // Differences from the CPU backend, by construction only in float summation order: per-pixel sums are reduced
 // in parallel (double atomics), and blends reaching one pixel from several neighbours are added in a fixed
-// order that differs from the CPU's scan order. Equivalence tests: test/unit/test_cuda_backend.cpp.
+// order that differs from the CPU's scan order (compiled with --fmad=false, so single operations round as on
+// the CPU). Equivalence tests: test/unit/test_cuda_backend.cpp.
 #include <cuda_runtime.h>
 
 #include <cstring>
@@ -20,6 +21,7 @@
 #include "../src/core/loss_setup.hpp"
 #include "../src/core/pixel_rect.hpp"
 #include "diffdope/device.hpp"
+#include "diffdope/kernels/edges.hpp"
 #include "diffdope/kernels/pixel_loss.hpp"
 #include "diffdope/kernels/raster.hpp"
 #include "diffdope/kernels/shade.hpp"
@@ -77,6 +79,7 @@ struct CallParams {
   int image_w, image_h;
   PixelLossParams P;
   int has_mask, has_rgb, has_depth;
+  float k_edges, edge_scale;  // the paper's edge term (0: off)
 };
 
 constexpr unsigned long long kEmptyKey = ~0ull;
@@ -250,6 +253,46 @@ __global__ void loss_kernel(CallParams C, const Hypothesis* H, const PixelAttr* 
   warp_add(v_mask, sums + 4 * h + 2);
 }
 
+/// Edge term, stage 1: the render's grey image (mean of the blended colour).
+__global__ void grey_kernel(const Hypothesis* H, const PixelAttr* post, float* grey) {
+  const int i = blockIdx.x * blockDim.x + threadIdx.x, h = blockIdx.y;
+  const Hypothesis hy = H[h];
+  if (i >= hy.w * hy.h) return;
+  const PixelAttr& a = post[hy.offset + i];
+  grey[hy.offset + i] = (a.c[0] + a.c[1] + a.c[2]) / 3.f;
+}
+
+/// Edge term, stage 2: |observed edges - rendered Sobel edges| over S (sums[4h + 3]) and dL/d(Sobel responses).
+__global__ void edge_kernel(CallParams C, const Hypothesis* H, const float* grey, const float* S_img,
+                            const float* E_img, int with_gradient, float* g_sx, float* g_sy, double* sums) {
+  const int i = blockIdx.x * blockDim.x + threadIdx.x, h = blockIdx.y;
+  const Hypothesis hy = H[h];
+  float v = 0.f;
+  if (i < hy.w * hy.h && hy.valid) {
+    const int p = hy.offset + i, lx = i % hy.w, ly = i / hy.w;
+    const int pix = (hy.y0 + ly) * C.image_w + hy.x0 + lx;
+    const float S = C.has_mask ? S_img[pix] : 1.f;
+    float gsx = 0.f, gsy = 0.f;
+    if (S > 0.f) {
+      float gx, gy;
+      const float e = edge_value(grey + hy.offset, hy.w, hy.h, lx, ly, C.edge_scale, &gx, &gy);
+      v = S * fabsf(E_img[pix] - e);
+      if (with_gradient) edge_value_backward(gx, gy, C.edge_scale, C.k_edges * S * signf(e - E_img[pix]), &gsx, &gsy);
+    }
+    if (with_gradient) g_sx[p] = gsx, g_sy[p] = gsy;
+  }
+  warp_add(v, sums + 4 * h + 3);
+}
+
+/// Edge term, stage 3: gathers the Sobel gradients into each pixel's colour gradient.
+__global__ void edge_gather_kernel(const Hypothesis* H, const float* g_sx, const float* g_sy, PixelAttr* g_post) {
+  const int i = blockIdx.x * blockDim.x + threadIdx.x, h = blockIdx.y;
+  const Hypothesis hy = H[h];
+  if (i >= hy.w * hy.h || !hy.valid) return;
+  const float g = grey_gradient(g_sx + hy.offset, g_sy + hy.offset, hy.w, hy.h, i % hy.w, i / hy.w) / 3.f;
+  for (int ch = 0; ch < 3; ++ch) g_post[hy.offset + i].c[ch] += g;
+}
+
 /// Backward per pixel: blends that reached it (into its pre-blend gradient and the silhouette gradient), then
 /// its shading; the 6-D pose gradient is reduced per hypothesis.
 __global__ void backward_kernel(CallParams C, const Hypothesis* H, const Vec3f* cam, const Vec2f* pix,
@@ -310,13 +353,25 @@ struct DeviceImage {
     }
     return h;
   }
+  float* pinned = nullptr;  // staging buffer (page-locked: the copy runs at full bus speed)
+  size_t pinned_size = 0;
+  ~DeviceImage() {
+    if (pinned) cudaFreeHost(pinned);
+  }
   const float* get(const cv::Mat& m, cudaStream_t s) {
     if (m.empty()) return nullptr;
     const cv::Mat c = m.isContinuous() ? m : m.clone();
     const uint64_t hs = sample_hash(c);
     if (m.data != host || m.rows != rows || m.cols != cols || m.channels() != channels || hs != hash) {
-      data.upload(c.ptr<float>(), c.total() * c.channels(), s);
-      check(cudaStreamSynchronize(s), "image upload");  // c may be a temporary clone
+      const size_t n = c.total() * c.channels();
+      if (n > pinned_size) {
+        if (pinned) cudaFreeHost(pinned);
+        pinned = nullptr;
+        check(cudaMallocHost(&pinned, sizeof(float) * n), "cudaMallocHost");
+        pinned_size = n;
+      }
+      std::memcpy(pinned, c.ptr<float>(), sizeof(float) * n);
+      data.upload(pinned, n, s);
       host = m.data, rows = m.rows, cols = m.cols, channels = m.channels(), hash = hs;
     }
     return data.ptr;
@@ -364,7 +419,8 @@ class CudaRenderer final : public Renderer {
   DeviceBuffer<BlendEvent> events_;
   DeviceBuffer<unsigned char> has_event_;
   DeviceBuffer<double> out_;
-  DeviceImage mask_img_, rgb_img_, depth_img_;
+  DeviceBuffer<float> grey_, g_sx_, g_sy_;
+  DeviceImage mask_img_, rgb_img_, depth_img_, edges_img_;
 };
 
 const MeshView& CudaRenderer::upload_mesh(const Mesh& mesh) {
@@ -518,17 +574,16 @@ void CudaRenderer::evaluate(const Camera& camera, const Mesh& mesh, const Observ
   obs.validate(camera);
   if (!(loss.depth_truncation > 0)) throw std::invalid_argument("loss: depth_truncation must be > 0");
   const LossSetup setup = make_loss_setup(camera, obs, loss);
-  if (setup.k_edges != 0.f)
-    throw std::invalid_argument("CUDA backend: the edge term (loss.weight_edges > 0) is not implemented on CUDA yet; "
-                                "use device: cpu");
   out.assign(poses.size(), LossValue());
   if (poses.empty()) return;
   CallParams C = forward(camera, mesh, poses, obs.mask, true);
   C.P = setup.P;
   C.has_mask = obs.has_mask(), C.has_rgb = obs.has_rgb(), C.has_depth = obs.has_depth();
+  C.k_edges = setup.k_edges, C.edge_scale = setup.edge_scale;
   const float* S = mask_img_.get(obs.mask, stream_);
   const float* I = rgb_img_.get(obs.rgb, stream_);
   const float* D = depth_img_.get(obs.depth, stream_);
+  const float* E = C.k_edges != 0.f ? edges_img_.get(obs.edges, stream_) : nullptr;
   const size_t B = poses.size();
   out_.reserve(10 * B);
   check(cudaMemsetAsync(out_.ptr, 0, sizeof(double) * 10 * B, stream_), "memset");
@@ -536,6 +591,14 @@ void CudaRenderer::evaluate(const Camera& camera, const Mesh& mesh, const Observ
   const int T = 128;
   const dim3 gp((max_pixels_ + T - 1) / T, C.B);
   loss_kernel<<<gp, T, 0, stream_>>>(C, d_hyp_.ptr, post_.ptr, S, I, D, with_gradient ? 1 : 0, g_post_.ptr, out_.ptr);
+  if (E) {  // the edge term, as the CPU backend computes it, after the per-pixel terms
+    grey_.reserve(size_t(total_pixels_));
+    if (with_gradient) g_sx_.reserve(size_t(total_pixels_)), g_sy_.reserve(size_t(total_pixels_));
+    grey_kernel<<<gp, T, 0, stream_>>>(d_hyp_.ptr, post_.ptr, grey_.ptr);
+    edge_kernel<<<gp, T, 0, stream_>>>(C, d_hyp_.ptr, grey_.ptr, S, E, with_gradient ? 1 : 0, g_sx_.ptr, g_sy_.ptr,
+                                       out_.ptr);
+    if (with_gradient) edge_gather_kernel<<<gp, T, 0, stream_>>>(d_hyp_.ptr, g_sx_.ptr, g_sy_.ptr, g_post_.ptr);
+  }
   if (with_gradient)
     backward_kernel<<<gp, T, 0, stream_>>>(C, d_hyp_.ptr, cam_.ptr, pix_.ptr, area_.ptr, level_.ptr, tri_.ptr,
                                            pre_.ptr, g_post_.ptr, events_.ptr, has_event_.ptr, bary_.ptr,
@@ -550,7 +613,7 @@ void CudaRenderer::evaluate(const Camera& camera, const Mesh& mesh, const Observ
       continue;
     }
     const double* s = host_out_ + 4 * h;
-    finish_loss(setup, s[0], s[1], s[2], 0.0, &res);
+    finish_loss(setup, s[0], s[1], s[2], s[3], &res);
     if (with_gradient)
       for (int k = 0; k < 6; ++k) res.gradient[k] = host_out_[4 * B + 6 * h + k];
   }

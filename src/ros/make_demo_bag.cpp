@@ -45,6 +45,7 @@
 #include <string>
 #include <vector>
 
+#include "diffdope_ros/conversions.hpp"
 #include "diffdope/object_config.hpp"
 #include "diffdope/procedural.hpp"
 #include "diffdope/synthetic.hpp"
@@ -233,19 +234,6 @@ FrameCheck check_frame(Renderer& renderer, const Camera& cam, const std::vector<
 }
 
 // ---- Messages ----
-
-geometry_msgs::Pose to_msg(const Pose& p) {
-  geometry_msgs::Pose m;
-  m.position.x = p.t.x();
-  m.position.y = p.t.y();
-  m.position.z = p.t.z();
-  const auto q = p.quaternion_xyzw();
-  m.orientation.x = q[0];
-  m.orientation.y = q[1];
-  m.orientation.z = q[2];
-  m.orientation.w = q[3];
-  return m;
-}
 
 std_msgs::Header header(const ros::Time& stamp, const std::string& frame, uint32_t seq) {
   std_msgs::Header h;
@@ -470,7 +458,7 @@ int main(int argc, char** argv) {
         diffdope_ros::InitialPose p;
         p.name = objects[i].name;
         p.pose.header = h;
-        p.pose.pose = to_msg(poses[i]);
+        p.pose.pose = diffdope_ros::pose_to_msg(poses[i]);
         gt.poses.push_back(p);
       }
       bag.write("/ground_truth", t, gt);
@@ -483,7 +471,7 @@ int main(int argc, char** argv) {
           d.write_time = t + ros::Duration(args.detector_latency);
           d.topic = "/dope/pose_" + objects[i].name;
           d.msg.header = header(t, kLinkFrame, uint32_t(k / args.detector_every));
-          d.msg.pose = to_msg(T_link_optical * noisy);
+          d.msg.pose = diffdope_ros::pose_to_msg(T_link_optical * noisy);
           pending.push_back(d);
           ++detections;
         }
