@@ -2,12 +2,17 @@
 // and refined errors against the bag's ground truth, then a summary once the refiner has been quiet for
 // ~idle_timeout seconds (wall time: the bag's clock stops when it ends), and exits (0 = every object refined
 // and every refined pose within ~max_translation / ~max_rotation_deg).
+#include <geometry_msgs/PoseStamped.h>
 #include <ros/ros.h>
+#include <tf2_ros/buffer.h>
+#include <tf2_ros/transform_listener.h>
 
+#include <boost/bind/bind.hpp>
 #include <cmath>
 #include <cstdio>
 
 #include "diffdope/object_config.hpp"
+#include "diffdope_ros/conversions.hpp"
 #include "diffdope_ros/pose_checker.hpp"
 
 namespace {
@@ -15,12 +20,51 @@ namespace {
 struct CheckerNode {
   std::unique_ptr<diffdope_ros::PoseChecker> checker;
   std::vector<std::string> objects;
+  std::map<std::string, diffdope::Pose> model_transform;
+  std::map<std::string, bool> symmetric;
+  std::vector<std::string> detection_topics;
+  // The detector's own error, for comparison: its poses (any frame) and the ground truth by stamp.
+  std::vector<std::pair<std::string, geometry_msgs::PoseStamped>> detections;
+  std::map<std::pair<int64_t, std::string>, geometry_msgs::PoseStamped> truth;
+  tf2_ros::Buffer tf{ros::Duration(600)};
+
+  void onDetection(const geometry_msgs::PoseStampedConstPtr& m, const std::string& name) {
+    detections.emplace_back(name, *m);
+  }
   ros::WallTime last_refined, started = ros::WallTime::now();
   double idle_timeout = 5, start_timeout = 60;
   int exit_code = -1;
 
-  void onTruth(const diffdope_ros::InitialPoseArrayConstPtr& m) { checker->addGroundTruth(*m); }
+  void onTruth(const diffdope_ros::InitialPoseArrayConstPtr& m) {
+    checker->addGroundTruth(*m);
+    for (const auto& p : m->poses) truth[{int64_t(p.pose.header.stamp.toNSec()), p.name}] = p.pose;
+  }
+  /// Mean detector error per object (translation m, rotation rad) over detections with ground truth.
+  std::map<std::string, std::pair<double, double>> detectorErrors(std::map<std::string, int>* counts) {
+    std::map<std::string, std::pair<double, double>> sum;
+    for (const auto& [name, d] : detections) {
+      auto it = truth.find({int64_t(d.header.stamp.toNSec()), name});
+      if (it == truth.end()) continue;
+      try {
+        const auto t = tf.lookupTransform(it->second.header.frame_id, d.header.frame_id, d.header.stamp);
+        const diffdope::Pose cam_from_det = diffdope_ros::pose_from_transform(t.transform, "tf");
+        const diffdope::Pose mesh = cam_from_det * diffdope_ros::pose_from_msg(d.pose, "detection") *
+                                    model_transform[name];
+        const auto e = diffdope_ros::pose_error(mesh, diffdope_ros::pose_from_msg(it->second.pose, "truth"),
+                                                symmetric[name]);
+        sum[name].first += e.translation_m;
+        sum[name].second += e.rotation_rad;
+        ++(*counts)[name];
+      } catch (const std::exception&) {  // no TF for that detection: not scored
+      }
+    }
+    for (auto& [name, v] : sum) v.first /= (*counts)[name], v.second /= (*counts)[name];
+    return sum;
+  }
   void onRefined(const diffdope_ros::RefinedPoseArrayConstPtr& m) {
+    if (last_refined.isZero())
+      std::printf("Per refined object: its start (detector, track, or prediction = track extrapolated) and the\n"
+                  "start's and the refined pose's error against ground truth.\n");
     last_refined = ros::WallTime::now();
     for (const auto& row : checker->addRefined(*m)) std::printf("%s\n", diffdope_ros::PoseChecker::formatRow(row).c_str());
     std::fflush(stdout);
@@ -30,8 +74,10 @@ struct CheckerNode {
     if (last_refined.isZero() ? (now - started).toSec() < start_timeout : (now - last_refined).toSec() < idle_timeout)
       return;
     const auto summary = checker->summary();
+    std::map<std::string, int> det_counts;
+    const auto det = detectorErrors(&det_counts);
     bool pass = !checker->rows().empty();
-    std::printf("\n%-8s %6s %8s %22s %22s %10s\n", "object", "frames", "within", "initial mean mm / deg",
+    std::printf("\n%-8s %6s %8s %22s %22s %10s\n", "object", "frames", "within", "start mean mm / deg",
                 "refined mean mm / deg", "max mm/deg");
     for (const auto& name : objects) {
       auto it = summary.find(name);
@@ -47,6 +93,10 @@ struct CheckerNode {
                   o.mean_rotation_rad * 180 / M_PI, 1e3 * o.max_translation_m, o.max_rotation_rad * 180 / M_PI);
       pass = pass && o.within == o.count;
     }
+    for (const auto& name : objects)
+      if (det.count(name))
+        std::printf("%-8s detector alone: %.1f mm / %.1f deg mean over %d detections\n", name.c_str(),
+                    1e3 * det.at(name).first, det.at(name).second * 180 / M_PI, det_counts[name]);
     double latency = 0;
     for (const auto& r : checker->rows()) latency += r.latency;
     if (!checker->rows().empty())
@@ -71,7 +121,12 @@ int main(int argc, char** argv) {
     for (const auto& o : cfg.objects) {
       node.objects.push_back(o.name);
       symmetric[o.name] = o.symmetric;
+      node.model_transform[o.name] = o.model_transform;
+      node.detection_topics.push_back(o.pose_topic.empty() ? pnh.param<std::string>("detection_topic_prefix",
+                                                                                    "/dope/pose_") + o.name
+                                                           : o.pose_topic);
     }
+    node.symmetric = symmetric;
   } catch (const std::exception& e) {
     ROS_FATAL("pose_checker: %s", e.what());
     return 2;
@@ -83,6 +138,12 @@ int main(int argc, char** argv) {
   auto truth_sub = nh.subscribe("ground_truth", 100, &CheckerNode::onTruth, &node);
   auto refined_sub = nh.subscribe("refined_poses", 100, &CheckerNode::onRefined, &node);
   auto timer = nh.createWallTimer(ros::WallDuration(0.5), &CheckerNode::onTimer, &node);
+  tf2_ros::TransformListener tf_listener(node.tf);
+  std::vector<ros::Subscriber> detection_subs;
+  for (size_t i = 0; i < node.objects.size(); ++i)
+    detection_subs.push_back(nh.subscribe<geometry_msgs::PoseStamped>(
+        node.detection_topics[i], 50,
+        boost::bind(&CheckerNode::onDetection, &node, boost::placeholders::_1, node.objects[i])));
   ros::spin();
   return node.exit_code < 0 ? 1 : node.exit_code;
 }
