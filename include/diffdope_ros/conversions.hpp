@@ -35,4 +35,7 @@ geometry_msgs::Pose pose_to_msg(const diffdope::Pose& pose);
 diffdope::Pose pose_from_transform(const geometry_msgs::Transform& msg, const std::string& what);
 geometry_msgs::Transform transform_to_msg(const diffdope::Pose& pose);
 
+/// v with `precision` decimals, for log messages and diagnostics.
+std::string format_fixed(double v, int precision = 3);
+
 }  // namespace diffdope_ros

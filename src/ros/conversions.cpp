@@ -5,6 +5,7 @@
 
 #include <cmath>
 #include <opencv2/imgproc.hpp>
+#include <sstream>
 #include <stdexcept>
 
 #include "diffdope/observation.hpp"
@@ -135,6 +136,14 @@ geometry_msgs::Transform transform_to_msg(const diffdope::Pose& pose) {
   t.translation.z = p.position.z;
   t.rotation = p.orientation;
   return t;
+}
+
+std::string format_fixed(double v, int precision) {
+  std::ostringstream s;
+  s.setf(std::ios::fixed);
+  s.precision(precision);
+  s << v;
+  return s.str();
 }
 
 }  // namespace diffdope_ros

@@ -1,0 +1,64 @@
+// RefinerNodelet's visual outputs, computed only while someone subscribes: the overlay image (initial and refined
+// outlines over the RGB image) and the meshes as rviz markers.
+#include <opencv2/imgproc.hpp>
+#include <sensor_msgs/image_encodings.h>
+#include <visualization_msgs/MarkerArray.h>
+
+#include "diffdope_ros/conversions.hpp"
+#include "diffdope_ros/refiner_nodelet.hpp"
+
+namespace diffdope_ros {
+
+void RefinerNodelet::publishOverlay(const Frame& frame, const std::vector<size_t>& slots,
+                                    const std::vector<diffdope::RefineResult>& results) {
+  cv::Mat canvas;
+  frame.observation.rgb.convertTo(canvas, CV_8UC3, 255.0);
+  cv::cvtColor(canvas, canvas, cv::COLOR_RGB2BGR);
+  auto renderer = diffdope::make_cpu_renderer(refiner_options_.render);
+  for (size_t k = 0; k < results.size(); ++k) {
+    const Slot& s = *slots_[slots[k]];
+    const diffdope::RefineResult& r = results[k];
+    if (!r.error.empty()) continue;
+    auto outline = [&](const diffdope::Pose& pose, const cv::Scalar& colour, int thickness) {
+      const auto img = renderer->render(frame.camera, *s.mesh, {pose}).front();
+      if (img.coverage.empty()) return;
+      cv::Mat full = img.coverage >= 0.5;  // full-frame coverage
+      std::vector<std::vector<cv::Point>> contours;
+      cv::findContours(full, contours, cv::RETR_EXTERNAL, cv::CHAIN_APPROX_SIMPLE);
+      cv::drawContours(canvas, contours, -1, colour, thickness, cv::LINE_AA);
+      return;
+    };
+    outline(r.initial_pose, cv::Scalar(0, 200, 255), 1);                                   // initial: amber
+    outline(r.pose, r.plausible ? cv::Scalar(60, 220, 60) : cv::Scalar(40, 40, 230), 2);  // refined: green / red
+    const Eigen::Vector2d c = frame.camera.project(r.pose.t);
+    cv::putText(canvas, s.config.name + (r.plausible ? "" : " (implausible)"), cv::Point(int(c.x()), int(c.y())),
+                cv::FONT_HERSHEY_SIMPLEX, 0.5, cv::Scalar(255, 255, 255), 1, cv::LINE_AA);
+  }
+  overlay_pub_.publish(cv_bridge::CvImage(frame.header, sensor_msgs::image_encodings::BGR8, canvas).toImageMsg());
+}
+
+void RefinerNodelet::publishMarkers(const Frame& frame, const std::vector<size_t>& slots,
+                                    const std::vector<diffdope::RefineResult>& results) {
+  visualization_msgs::MarkerArray markers;
+  for (size_t k = 0; k < results.size(); ++k) {
+    const Slot& s = *slots_[slots[k]];
+    visualization_msgs::Marker m;
+    m.header = frame.header;
+    m.ns = "diffdope";
+    m.id = int(slots[k]);
+    m.type = visualization_msgs::Marker::MESH_RESOURCE;
+    m.mesh_resource = s.config.mesh.rfind("package://", 0) == 0 ? s.config.mesh : "file://" + s.config.mesh_path;
+    m.mesh_use_embedded_materials = true;
+    m.action = results[k].error.empty() ? int(visualization_msgs::Marker::ADD) : int(visualization_msgs::Marker::DELETE);
+    m.pose = pose_to_msg(results[k].pose);  // the mesh's own frame
+    m.scale.x = m.scale.y = m.scale.z = s.config.mesh_scale;
+    m.color.r = results[k].plausible ? 0.2f : 0.9f;
+    m.color.g = results[k].plausible ? 0.9f : 0.2f;
+    m.color.b = 0.2f;
+    m.color.a = 0.8f;
+    markers.markers.push_back(m);
+  }
+  markers_pub_.publish(markers);
+}
+
+}  // namespace diffdope_ros
