@@ -10,6 +10,8 @@
 // the CPU). Equivalence tests: test/unit/test_cuda_backend.cpp.
 #include <cuda_runtime.h>
 
+#include <climits>
+#include <cstdint>
 #include <cstring>
 #include <limits>
 #include <map>
@@ -50,6 +52,7 @@ struct DeviceBuffer {
     if (n > capacity) {
       if (ptr) cudaFree(ptr);
       ptr = nullptr;
+      capacity = 0;  // a failed allocation must not leave a stale capacity behind
       check(cudaMalloc(&ptr, sizeof(T) * (n ? n : 1)), "cudaMalloc");
       capacity = n;
     }
@@ -137,6 +140,7 @@ __global__ void raster_kernel(CallParams C, const Hypothesis* H, const Vec3f* ca
     for (int x = xs; x <= xe; ++x, e[0] += R.dx[0], e[1] += R.dx[1], e[2] += R.dx[2]) {
       if (!raster_inside(R, e)) continue;
       const float zp = raster_depth(R, e);
+      if (!(zp < INFINITY)) continue;  // as the CPU's zp < +inf test
       const unsigned long long k = (static_cast<unsigned long long>(__float_as_uint(zp)) << 32) | unsigned(t);
       atomicMin(key + hy.offset + (y - hy.y0) * hy.w + (x - hy.x0), k);
     }
@@ -192,15 +196,16 @@ __global__ void blend_detect_kernel(CallParams C, const Hypothesis* H, const Vec
   }
 }
 
-/// The (up to four) event slots that can target pixel p: its own two and those of its left and upper
-/// neighbours. Fixed order, so forward and backward see the events in the same order.
+/// The (up to four) event slots that can target pixel p, in the CPU's scan order (pixels row by row, each
+/// pixel's horizontal pair before its vertical one): upper neighbour's vertical, left neighbour's horizontal,
+/// then p's own two. So the blended attributes add up in the same order as on the CPU.
 __device__ int event_slots(const Hypothesis& hy, int i, int p, int slots[4]) {
   const int lx = i % hy.w, ly = i / hy.w;
   int n = 0;
+  if (ly > 0) slots[n++] = 2 * (p - hy.w) + 1;
+  if (lx > 0) slots[n++] = 2 * (p - 1);
   slots[n++] = 2 * p;
   slots[n++] = 2 * p + 1;
-  if (lx > 0) slots[n++] = 2 * (p - 1);
-  if (ly > 0) slots[n++] = 2 * (p - hy.w) + 1;
   return n;
 }
 
@@ -335,45 +340,34 @@ struct DeviceMesh {
 };
 
 /// An observed image on the device, uploaded once per frame: the refiner evaluates the same images on every
-/// iteration. A new frame is recognised by address, size and a hash of ~2k evenly spaced values (a new image
-/// can reuse a freed one's address).
+/// iteration. The pinned staging buffer keeps exactly what was uploaded, so a new frame is recognised by an
+/// exact comparison (~0.1 ms per MB; an address or a sampled hash could be reused by a different image).
 struct DeviceImage {
   DeviceBuffer<float> data;
-  const void* host = nullptr;
-  int rows = 0, cols = 0, channels = 0;
-  uint64_t hash = 0;
-  static uint64_t sample_hash(const cv::Mat& c) {
-    const float* f = c.ptr<float>();
-    const size_t n = c.total() * c.channels(), step = n / 2048 + 1;
-    uint64_t h = 1469598103934665603ull;
-    for (size_t i = 0; i < n; i += step) {
-      uint32_t bits;
-      std::memcpy(&bits, f + i, 4);
-      h = (h ^ bits) * 1099511628211ull;
-    }
-    return h;
-  }
-  float* pinned = nullptr;  // staging buffer (page-locked: the copy runs at full bus speed)
-  size_t pinned_size = 0;
+  float* pinned = nullptr;  // page-locked copy of the uploaded image (the copy runs at full bus speed)
+  size_t pinned_size = 0, size = 0;
+  DeviceImage() = default;
+  DeviceImage(const DeviceImage&) = delete;
+  DeviceImage& operator=(const DeviceImage&) = delete;
   ~DeviceImage() {
     if (pinned) cudaFreeHost(pinned);
   }
   const float* get(const cv::Mat& m, cudaStream_t s) {
     if (m.empty()) return nullptr;
     const cv::Mat c = m.isContinuous() ? m : m.clone();
-    const uint64_t hs = sample_hash(c);
-    if (m.data != host || m.rows != rows || m.cols != cols || m.channels() != channels || hs != hash) {
-      const size_t n = c.total() * c.channels();
-      if (n > pinned_size) {
-        if (pinned) cudaFreeHost(pinned);
-        pinned = nullptr;
-        check(cudaMallocHost(&pinned, sizeof(float) * n), "cudaMallocHost");
-        pinned_size = n;
-      }
-      std::memcpy(pinned, c.ptr<float>(), sizeof(float) * n);
-      data.upload(pinned, n, s);
-      host = m.data, rows = m.rows, cols = m.cols, channels = m.channels(), hash = hs;
+    const size_t n = c.total() * c.channels();
+    if (n == size && std::memcmp(pinned, c.ptr<float>(), sizeof(float) * n) == 0) return data.ptr;
+    if (n > pinned_size) {
+      if (pinned) cudaFreeHost(pinned);
+      pinned = nullptr;
+      pinned_size = size = 0;
+      check(cudaMallocHost(&pinned, sizeof(float) * n), "cudaMallocHost");
+      pinned_size = n;
     }
+    size = 0;  // until the upload is queued
+    std::memcpy(pinned, c.ptr<float>(), sizeof(float) * n);
+    data.upload(pinned, n, s);
+    size = n;
     return data.ptr;
   }
 };
@@ -382,7 +376,10 @@ class CudaRenderer final : public Renderer {
  public:
   explicit CudaRenderer(const RenderOptions& options) : Renderer(options) {
     check(cudaStreamCreate(&stream_), "cudaStreamCreate");
-    check(cudaMallocHost(&host_out_, sizeof(double) * kMaxOut), "cudaMallocHost");
+    if (cudaMallocHost(&host_out_, sizeof(double) * kMaxOut) != cudaSuccess) {
+      cudaStreamDestroy(stream_);
+      throw std::runtime_error("CUDA backend: cannot allocate pinned host memory");
+    }
   }
   ~CudaRenderer() override {
     if (host_out_) cudaFreeHost(host_out_);
@@ -400,8 +397,10 @@ class CudaRenderer final : public Renderer {
 
   const MeshView& upload_mesh(const Mesh& mesh);
   /// Forward stages for every hypothesis: vertices .. blends. Fills hyp_ and the pixel buffers.
+  /// `evaluating`: evaluate() semantics (S = 1 without a mask; a non-rotation pose gets no work and an infinite
+  /// loss); else render() semantics (only non-finite poses are skipped), as the CPU backend.
   CallParams forward(const Camera& camera, const Mesh& mesh, const std::vector<Pose>& poses, const cv::Mat& mask,
-                     bool no_mask_means_everywhere);
+                     bool evaluating);
 
   cudaStream_t stream_ = nullptr;
   double* host_out_ = nullptr;
@@ -473,7 +472,7 @@ const MeshView& CudaRenderer::upload_mesh(const Mesh& mesh) {
 }
 
 CallParams CudaRenderer::forward(const Camera& camera, const Mesh& mesh, const std::vector<Pose>& poses,
-                                 const cv::Mat& mask, bool no_mask_means_everywhere) {
+                                 const cv::Mat& mask, bool evaluating) {
   camera.validate();
   if (mesh.num_triangles() == 0 || mesh.neighbors().size() != mesh.triangles.size())
     throw std::invalid_argument("renderer: mesh '" + mesh.name + "' is empty or not finalized");
@@ -489,22 +488,28 @@ CallParams CudaRenderer::forward(const Camera& camera, const Mesh& mesh, const s
   C.image_w = camera.width;
   C.image_h = camera.height;
 
-  const PixelRect box = mask_box(mask, camera.width, camera.height, no_mask_means_everywhere);
+  const PixelRect box = mask_box(mask, camera.width, camera.height, evaluating);
   hyp_.resize(poses.size());
-  total_pixels_ = 0;
+  int64_t total = 0;
   max_pixels_ = 1;
   for (size_t h = 0; h < poses.size(); ++h) {
     Hypothesis& hy = hyp_[h];
-    hy.valid = poses[h].is_valid(1e-3) ? 1 : 0;
+    const Pose& q = poses[h];
+    hy.valid = (evaluating ? q.is_valid(1e-3) : (q.R.allFinite() && q.t.allFinite())) ? 1 : 0;
     const PixelRect roi = hy.valid ? hypothesis_roi(camera, mesh, poses[h], C.near_z, box,
                                                     std::max(1, options_.roi_margin), options_.use_roi)
                                    : PixelRect{0, 0, 1, 1};
     hy.T = poses[h].to_kernel();
     hy.x0 = roi.x0, hy.y0 = roi.y0, hy.w = roi.width(), hy.h = roi.height();
-    hy.offset = total_pixels_;
-    total_pixels_ += hy.w * hy.h;
+    hy.offset = static_cast<int>(total);
+    total += int64_t(hy.w) * hy.h;
+    // Pixel indices (and the 2 * pixel event slots) are ints on the device.
+    if (total > INT_MAX / 2)
+      throw std::invalid_argument("CUDA backend: too many pixels in one call (" + std::to_string(poses.size()) +
+                                  " hypotheses); use smaller batches, images or a mask");
     max_pixels_ = std::max(max_pixels_, hy.w * hy.h);
   }
+  total_pixels_ = static_cast<int>(total);
   const size_t B = poses.size(), N = size_t(total_pixels_);
   d_hyp_.upload(hyp_.data(), B, stream_);
   cam_.reserve(B * C.nv);
@@ -539,6 +544,7 @@ std::vector<RenderImage> CudaRenderer::render(const Camera& camera, const Mesh& 
   if (!observed_mask.empty() && (observed_mask.type() != CV_32FC1 || observed_mask.cols != camera.width ||
                                  observed_mask.rows != camera.height))
     throw std::invalid_argument("render: observed mask must be CV_32FC1 of the camera's size");
+  if (poses.empty()) return {};
   forward(camera, mesh, poses, observed_mask, false);
   std::vector<PixelAttr> pre(total_pixels_), post(total_pixels_);
   std::vector<int> tri(total_pixels_);
@@ -640,8 +646,23 @@ CudaDeviceInfo cuda_probe_device() {
     info.reason = "cannot read CUDA device 0's properties";
     return info;
   }
-  info.available = true;
   info.name = std::string(prop.name) + " (sm_" + std::to_string(prop.major) + std::to_string(prop.minor) + ")";
+  int compute_mode = 0;
+  if (cudaDeviceGetAttribute(&compute_mode, cudaDevAttrComputeMode, 0) == cudaSuccess &&
+      compute_mode == cudaComputeModeProhibited) {
+    info.reason = info.name + " is in compute-prohibited mode";
+    return info;
+  }
+  // A device older than the compiled architectures has no kernel image for them: not usable.
+  cudaFuncAttributes attr{};
+  const cudaError_t k = cudaFuncGetAttributes(&attr, vertex_kernel);
+  if (k != cudaSuccess) {
+    info.reason = info.name + " cannot run this build's kernels (" + cudaGetErrorString(k) +
+                  "; rebuild with diffdope_ros_CUDA_ARCHITECTURES including it)";
+    cudaGetLastError();
+    return info;
+  }
+  info.available = true;
   return info;
 }
 

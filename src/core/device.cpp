@@ -44,11 +44,17 @@ std::unique_ptr<Renderer> make_renderer(const std::string& device, const RenderO
   if (device == "cuda") return make_cuda_renderer(options);
   if (device == "auto") {
     const CudaDeviceInfo info = cuda_device_info();
+    std::string why = info.reason;
     if (info.available) {
-      if (note) *note = "device auto: using CUDA on " + info.name;
-      return make_cuda_renderer(options);
+      try {
+        auto r = make_cuda_renderer(options);
+        if (note) *note = "device auto: using CUDA on " + info.name;
+        return r;
+      } catch (const std::exception& e) {  // e.g. the device is out of memory or exclusively in use
+        why = e.what();
+      }
     }
-    if (note) *note = "device auto: no CUDA device (" + info.reason + "), using the CPU backend";
+    if (note) *note = "device auto: no usable CUDA device (" + why + "), using the CPU backend";
     return make_cpu_renderer(options);
   }
   throw std::invalid_argument("device must be auto, cpu or cuda, got '" + device + "'");
