@@ -39,8 +39,11 @@ class ObjectTrack {
                        const Eigen::Vector3d& pivot = Eigen::Vector3d::Zero())
       : options_(options), pivot_(pivot) {}
 
-  /// A detection (already in the camera frame) stamped `stamp`. Replaces any unused older detection.
+  /// A detection (already in the camera frame) stamped `stamp`. Replaces any unused one (newest arrival wins).
   void add_detection(const Pose& pose_in_camera, double stamp);
+  /// Removes and returns the unused detection if it is older than any image stamped `image_stamp` or later can
+  /// use (the caller reports it: a detector stamping with another clock must not be ignored silently).
+  std::optional<Seed> take_stale_detection(double image_stamp);
   /// Whether a detection not yet used is usable for an image stamped `image_stamp`.
   bool has_fresh_detection(double image_stamp) const;
 
@@ -58,6 +61,8 @@ class ObjectTrack {
   bool report(const Pose& refined, bool plausible, double image_stamp);
 
   bool tracking() const { return track_.has_value(); }
+  /// Whether the track can still seed a frame stamped `now` (not timed out).
+  bool tracking(double now) const;
   int failures() const { return failures_; }
   void reset();
 

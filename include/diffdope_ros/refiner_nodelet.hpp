@@ -15,6 +15,7 @@
 #include <message_filters/sync_policies/approximate_time.h>
 #include <message_filters/synchronizer.h>
 #include <nodelet/nodelet.h>
+#include <ros/callback_queue.h>
 #include <ros/ros.h>
 #include <sensor_msgs/CameraInfo.h>
 #include <sensor_msgs/Image.h>
@@ -110,8 +111,11 @@ class RefinerNodelet : public nodelet::Nodelet {
   void absorbDetections(const Frame& frame);
   /// Per object (slot index), its initial poses; the refiner shares the runs among them and the loss decides.
   using SeedList = std::vector<std::pair<size_t, std::vector<diffdope::Seed>>>;
+  /// Refines and publishes; objects that could not be refined are named (with the reason) in `skipped`.
   std::vector<diffdope_ros::RefinedPose> refineAndPublish(const Frame& frame, const SeedList& seeds,
-                                                          const diffdope::RefinerOptions& options);
+                                                          const diffdope::RefinerOptions& options,
+                                                          std::vector<std::string>* skipped);
+  void updateTrackingFlags(double stamp);  // Slot::tracking for diagnostics
   void reportLostTrack(const Slot& slot);
   void publishOverlay(const Frame& frame, const std::vector<size_t>& slots,
                       const std::vector<diffdope::RefineResult>& results);
@@ -146,6 +150,11 @@ class RefinerNodelet : public nodelet::Nodelet {
   std::unique_ptr<message_filters::Synchronizer<Policy4>> sync4_;
   ros::Subscriber initial_poses_sub_;
   ros::ServiceServer refine_srv_;
+  // The service has its own queue and thread: a call waiting for the worker holds none of the manager's
+  // threads (which run this nodelet's inputs and every other nodelet in the manager).
+  ros::CallbackQueue service_queue_;
+  std::unique_ptr<ros::AsyncSpinner> service_spinner_;
+  ros::WallTime first_arrival_;  // first rgb message (the sync watchdog before any synchronized set)
   ros::WallTimer watchdog_timer_;
 
   // Outputs.

@@ -15,8 +15,19 @@ const char* to_string(SeedSource s) {
 }
 
 void ObjectTrack::add_detection(const Pose& pose_in_camera, double stamp) {
-  if (detection_ && detection_->stamp > stamp) return;  // an older detection arriving late
+  // The newest arrival wins, whatever its stamp: one bogus (e.g. future) stamp must not block later detections.
   detection_ = Seed{pose_in_camera, SeedSource::kDetector, stamp};
+}
+
+std::optional<Seed> ObjectTrack::take_stale_detection(double image_stamp) {
+  if (!detection_ || image_stamp - detection_->stamp <= options_.max_detection_age) return std::nullopt;
+  auto d = detection_;  // older than any image to come can use: it never will be
+  detection_.reset();
+  return d;
+}
+
+bool ObjectTrack::tracking(double now) const {
+  return track_ && now - track_->stamp <= options_.track_timeout;
 }
 
 bool ObjectTrack::has_fresh_detection(double image_stamp) const {
@@ -75,11 +86,14 @@ bool ObjectTrack::report(const Pose& refined, bool plausible, double image_stamp
   if (plausible) {
     failures_ = 0;
     if (options_.tracking) {
-      // Keep the previous pose for the velocity only when it is recent (else the motion estimate is stale).
-      if (track_ && image_stamp - track_->stamp <= options_.track_timeout && image_stamp > track_->stamp)
+      // Keep the previous pose for the velocity only when it is recent (else the motion estimate is stale);
+      // the same frame refined again (a service call after streaming) keeps the velocity it had.
+      if (track_ && image_stamp == track_->stamp) {
+      } else if (track_ && image_stamp - track_->stamp <= options_.track_timeout && image_stamp > track_->stamp) {
         previous_ = track_;
-      else
+      } else {
         previous_.reset();
+      }
       track_ = Seed{refined, SeedSource::kTrack, image_stamp};
     }
     return false;

@@ -41,8 +41,13 @@ void RefinerNodelet::onInit() {
 
   worker_ = std::thread([this] { workerLoop(); });
   setupInputs();
-  // The service runs on the multi-threaded queue: a call waits for the worker without holding up the inputs.
-  refine_srv_ = getMTPrivateNodeHandle().advertiseService("refine", &RefinerNodelet::onRefineService, this);
+  // The service runs on its own queue and thread: a call waits for the worker without holding up the inputs or
+  // the other nodelets of the manager. Calls are served one after the other (the worker refines one at a time).
+  ros::NodeHandle service_nh(getPrivateNodeHandle());
+  service_nh.setCallbackQueue(&service_queue_);
+  refine_srv_ = service_nh.advertiseService("refine", &RefinerNodelet::onRefineService, this);
+  service_spinner_ = std::make_unique<ros::AsyncSpinner>(1, &service_queue_);
+  service_spinner_->start();
   watchdog_timer_ = pnh.createWallTimer(ros::WallDuration(1.0), &RefinerNodelet::onWatchdog, this);
   NODELET_INFO_STREAM("diffdope refiner ready: mode "
                       << (mode_ == Mode::kOnRequest ? "on_request" : mode_ == Mode::kTracking ? "tracking" : "continuous")
@@ -185,6 +190,7 @@ RefinerNodelet::~RefinerNodelet() {
   work_cv_.notify_all();
   if (worker_.joinable()) worker_.join();
   watchdog_timer_.stop();
+  if (service_spinner_) service_spinner_->stop();
   refine_srv_.shutdown();
   rgb_sub_.unsubscribe();
   info_sub_.unsubscribe();
@@ -203,6 +209,7 @@ RefinerNodelet::~RefinerNodelet() {
 void RefinerNodelet::noteArrival(int index, const std_msgs::Header& header) {
   std::lock_guard<std::mutex> lock(arrival_mutex_);
   last_arrival_[index] = ros::WallTime::now();
+  if (index == 0 && first_arrival_.isZero()) first_arrival_ = last_arrival_[index];
   last_stamp_[index] = header.stamp;
 }
 
@@ -321,7 +328,8 @@ void RefinerNodelet::onWatchdog(const ros::WallTimerEvent&) {
   const ros::WallTime now = ros::WallTime::now();
   std::lock_guard<std::mutex> lock(arrival_mutex_);
   const bool rgb_recent = !last_arrival_[0].isZero() && (now - last_arrival_[0]).toSec() < 1.5;
-  const double since_sync = last_sync_.isZero() ? (now - last_arrival_[0]).toSec() : (now - last_sync_).toSec();
+  // Before any synchronized set, count from the first rgb message (a silent depth or mask topic).
+  const double since_sync = last_sync_.isZero() ? (now - first_arrival_).toSec() : (now - last_sync_).toSec();
   if (rgb_recent && since_sync > sync_timeout_) {
     std::ostringstream msg;
     msg << "no synchronized input for " << format_fixed(since_sync, 1) << " s (~sync_timeout " << sync_timeout_
@@ -371,6 +379,7 @@ void RefinerNodelet::onDiagnostics(diagnostic_updater::DiagnosticStatusWrapper& 
   stat.add("last refine time (ms)", format_fixed(s.last_refine_ms, 1));
   stat.add("last error", e.last_error);
   for (const auto& kv : e.error_counts) stat.add("errors: " + kv.first, kv.second);
+  for (const auto& kv : e.warn_counts) stat.add("warnings: " + kv.first, kv.second);
 }
 
 }  // namespace diffdope_ros

@@ -30,7 +30,9 @@ void RefinerNodelet::publishOverlay(const Frame& frame, const std::vector<size_t
     };
     outline(r.initial_pose, cv::Scalar(0, 200, 255), 1);                                   // initial: amber
     outline(r.pose, r.plausible ? cv::Scalar(60, 220, 60) : cv::Scalar(40, 40, 230), 2);  // refined: green / red
+    if (!(r.pose.t.z() > refiner_options_.render.near_plane)) continue;
     const Eigen::Vector2d c = frame.camera.project(r.pose.t);
+    if (!c.allFinite() || std::abs(c.x()) > 1e5 || std::abs(c.y()) > 1e5) continue;
     cv::putText(canvas, s.config.name + (r.plausible ? "" : " (implausible)"), cv::Point(int(c.x()), int(c.y())),
                 cv::FONT_HERSHEY_SIMPLEX, 0.5, cv::Scalar(255, 255, 255), 1, cv::LINE_AA);
   }
@@ -52,6 +54,7 @@ void RefinerNodelet::publishMarkers(const Frame& frame, const std::vector<size_t
     m.action = results[k].error.empty() ? int(visualization_msgs::Marker::ADD) : int(visualization_msgs::Marker::DELETE);
     m.pose = pose_to_msg(results[k].pose);  // the mesh's own frame
     m.scale.x = m.scale.y = m.scale.z = s.config.mesh_scale;
+    m.lifetime = ros::Duration(track_options_.track_timeout);  // a lost object does not stay drawn
     m.color.r = results[k].plausible ? 0.2f : 0.9f;
     m.color.g = results[k].plausible ? 0.9f : 0.2f;
     m.color.b = 0.2f;

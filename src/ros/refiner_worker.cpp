@@ -25,8 +25,13 @@ void RefinerNodelet::workerLoop() {
       }
     }
     try {
-      if (job) job->response.set_value(processRequest(job->request, frame));
-      else processStreaming(frame);
+      if (job) {
+        job->response.set_value(processRequest(job->request, frame));
+        std::lock_guard<std::mutex> lock(work_mutex_);
+        if (latest_frame_ == frame) frame_pending_ = false;  // that frame is done: do not stream it again
+      } else {
+        processStreaming(frame);
+      }
     } catch (const std::exception& e) {  // a bug guard: the node keeps running and says why
       errors_.error("internal", std::string("refinement failed: ") + e.what());
       if (job) {
@@ -47,13 +52,17 @@ diffdope::Pose RefinerNodelet::meshPoseInCamera(const geometry_msgs::PoseStamped
   const std::string what = "initial pose of '" + slot.config.name + "'";
   diffdope::Pose in_source = pose_from_msg(pose.pose, what);
   diffdope::Pose camera_from_source;  // identity when the pose is already in the camera frame
-  const std::string& camera = frame.header.frame_id;
-  const std::string source = pose.header.frame_id;
-  if (source != camera && source != "/" + camera) {
+  auto strip = [](const std::string& f) { return !f.empty() && f[0] == '/' ? f.substr(1) : f; };
+  const std::string camera = strip(frame.header.frame_id), source = strip(pose.header.frame_id);
+  // With ~fixed_frame, a pose stamped at another time goes through it even from the camera frame itself (a
+  // moving camera: DOPE's poses are in the optical frame of an earlier image).
+  const bool time_travel =
+      !fixed_frame_.empty() && !pose.header.stamp.isZero() && pose.header.stamp != frame.header.stamp;
+  if (source != camera || time_travel) {
     geometry_msgs::TransformStamped t;
     try {
       const ros::Duration timeout(tf_timeout_);
-      if (fixed_frame_.empty() || pose.header.stamp.isZero())
+      if (!time_travel)
         t = tf_buffer_->lookupTransform(camera, source, frame.header.stamp, timeout);
       else  // the detection's frame at its own stamp, through a fixed frame to the camera at the image stamp
         t = tf_buffer_->lookupTransform(camera, frame.header.stamp, source, pose.header.stamp, fixed_frame_, timeout);
@@ -90,6 +99,19 @@ void RefinerNodelet::absorbDetections(const Frame& frame) {
       errors_.error("pose/" + s.config.name, std::string("initial pose ignored: ") + e.what());
     }
   }
+  // A detection too old for this frame can never be used (frames only get newer): say so, with both stamps
+  // (a detector stamping with another clock, e.g. wall time under sim time, shows up here).
+  const double image_stamp = frame.header.stamp.toSec();
+  for (auto& slot : slots_)
+    if (auto stale = slot->track.take_stale_detection(image_stamp))
+      errors_.error("pose/" + slot->config.name,
+                    "initial pose of '" + slot->config.name + "' ignored: stamped " + format_fixed(stale->stamp) +
+                        ", more than ~max_detection_age (" + format_fixed(track_options_.max_detection_age, 1) +
+                        " s) before the image at " + format_fixed(image_stamp));
+}
+
+void RefinerNodelet::updateTrackingFlags(double stamp) {
+  for (auto& slot : slots_) slot->tracking = slot->mesh && slot->track.tracking(stamp);
 }
 
 void RefinerNodelet::processStreaming(const std::shared_ptr<const Frame>& frame) {
@@ -102,7 +124,9 @@ void RefinerNodelet::processStreaming(const std::shared_ptr<const Frame>& frame)
     auto starts = slots_[i]->track.seeds_for(stamp);
     if (!starts.empty()) seeds.emplace_back(i, std::move(starts));
   }
-  if (!seeds.empty()) refineAndPublish(*frame, seeds, refiner_options_);
+  std::vector<std::string> skipped;
+  if (!seeds.empty()) refineAndPublish(*frame, seeds, refiner_options_, &skipped);
+  updateTrackingFlags(stamp);
 }
 
 diffdope_ros::Refine::Response RefinerNodelet::processRequest(const diffdope_ros::Refine::Request& req,
@@ -139,6 +163,8 @@ diffdope_ros::Refine::Response RefinerNodelet::processRequest(const diffdope_ros
   if (!unknown.empty()) return fail("unknown object name(s): " + join(unknown) + " (not in the objects config)");
   if (!disabled.empty()) return fail("object(s) disabled: " + join(disabled));
   if (req.iterations < 0 || req.batch_size < 0) return fail("iterations and batch_size must be >= 0 (0 = configured)");
+  if (req.iterations > 1000 || req.batch_size > 256)
+    return fail("iterations <= 1000 and batch_size <= 256 per call (the worker would be blocked for too long)");
   if (!frame) return fail("no synchronized frame received yet (check the input topics)");
 
   absorbDetections(*frame);
@@ -156,7 +182,14 @@ diffdope_ros::Refine::Response RefinerNodelet::processRequest(const diffdope_ros
     }
     chosen[i] = true;
   }
+  // Check that every named object has a start before taking any detection (a failed request uses none up).
   std::vector<std::string> missing;
+  for (const auto& n : req.object_names) {
+    const size_t i = size_t(find(n));
+    if (!chosen[i] && !slots_[i]->track.peek(stamp)) missing.push_back(n);
+  }
+  if (!missing.empty())
+    return fail("no initial pose for " + join(missing) + " (no recent detection or track); pass initial_poses");
   if (req.object_names.empty() && req.initial_poses.empty()) {
     for (size_t i = 0; i < slots_.size(); ++i)
       if (slots_[i]->mesh)
@@ -172,27 +205,32 @@ diffdope_ros::Refine::Response RefinerNodelet::processRequest(const diffdope_ros
       if (auto starts = slots_[i]->track.seeds_for(stamp); !starts.empty()) {
         seeds.emplace_back(i, std::move(starts));
         chosen[i] = true;
-      } else {
-        missing.push_back(n);
       }
     }
-    if (!missing.empty())
-      return fail("no initial pose for " + join(missing) + " (no recent detection or track); pass initial_poses");
   }
   diffdope::RefinerOptions options = refiner_options_;
   if (req.iterations > 0) options.iterations = req.iterations;
   if (req.batch_size > 0) options.batch_size = req.batch_size;
-  res.results = refineAndPublish(*frame, seeds, options);
+  try {
+    options.validate();
+  } catch (const std::exception& e) {
+    return fail(e.what());
+  }
+  std::vector<std::string> skipped;
+  res.results = refineAndPublish(*frame, seeds, options, &skipped);
+  updateTrackingFlags(stamp);
   int ok = 0;
   for (const auto& r : res.results) ok += r.plausible;
-  res.success = true;
+  res.success = skipped.empty();  // every requested object has a result (plausible or not)
   res.message = "refined " + std::to_string(res.results.size()) + " object(s) on the frame at t=" + format_fixed(stamp) +
                 ", " + std::to_string(ok) + " plausible";
+  if (!skipped.empty()) res.message += "; not refined: " + join(skipped);
   return res;
 }
 
 std::vector<diffdope_ros::RefinedPose> RefinerNodelet::refineAndPublish(
-    const Frame& frame, const SeedList& seeds, const diffdope::RefinerOptions& options) {
+    const Frame& frame, const SeedList& seeds, const diffdope::RefinerOptions& options,
+    std::vector<std::string>* skipped) {
   const ros::WallTime start = ros::WallTime::now();
   std::vector<diffdope::ObjectTarget> targets;
   std::vector<size_t> slot_of, seeds_of;
@@ -211,6 +249,7 @@ std::vector<diffdope_ros::RefinedPose> RefinerNodelet::refineAndPublish(
         errors_.warn("empty_mask_" + s.config.name, "object '" + s.config.name + "' has no pixels in the mask (label " +
                                                         std::to_string(s.config.mask_label) + "): not refined");
         if (s.track.report(t.initial, false, frame.header.stamp.toSec())) reportLostTrack(s);
+        if (skipped) skipped->push_back(s.config.name + " (no pixels with its label in the mask)");
         continue;
       }
     }
@@ -219,7 +258,6 @@ std::vector<diffdope_ros::RefinedPose> RefinerNodelet::refineAndPublish(
     seeds_of.push_back(n);
   }
   if (targets.empty()) {
-    for (const auto& [i, starts] : seeds) slots_[i]->tracking = slots_[i]->track.tracking();
     return out;
   }
   // Per-call overrides (service) get their own refiner; streaming reuses the node's.
@@ -239,6 +277,7 @@ std::vector<diffdope_ros::RefinedPose> RefinerNodelet::refineAndPublish(
     const std::vector<diffdope::Seed>& starts = seeds[seeds_of[k]].second;
     if (!r.error.empty()) {
       errors_.error("refine_" + s.config.name, "object '" + s.config.name + "' not refined: " + r.error);
+      if (skipped) skipped->push_back(s.config.name + " (" + r.error + ")");
       if (s.track.report(starts.front().pose, false, frame.header.stamp.toSec())) reportLostTrack(s);
       continue;
     }
@@ -271,7 +310,6 @@ std::vector<diffdope_ros::RefinedPose> RefinerNodelet::refineAndPublish(
     t.transform = transform_to_msg(r.pose * inv_model);
     transforms.push_back(t);
   }
-  for (const auto& [i, starts] : seeds) slots_[i]->tracking = slots_[i]->track.tracking();
   if (publish_tf_ && !transforms.empty()) tf_broadcaster_->sendTransform(transforms);
   const double latency = (ros::Time::now() - frame.header.stamp).toSec();
   array.poses = out;

@@ -202,15 +202,33 @@ TEST(ObjectTrack, TrackingOffNeverSeedsFromTrack) {
   EXPECT_FALSE(t.report(at(0.9), false, 10.5));
 }
 
-TEST(ObjectTrack, LateOlderDetectionDoesNotReplaceNewer) {
+TEST(ObjectTrack, NewestArrivalWinsAndStaleDetectionsAreHandedBack) {
   ObjectTrack t(options());
   t.add_detection(at(0.2), 10.3);
-  t.add_detection(at(0.1), 10.0);  // older, arriving after the newer one
-  expect_seed(t.peek(10.3), SeedSource::kDetector, 0.2, 10.3);
+  t.add_detection(at(0.1), 10.0);  // arrives last: it wins (a bogus stamp must not block later detections)
+  expect_seed(t.peek(10.0), SeedSource::kDetector, 0.1, 10.0);
+  // Too old for the current image and every later one: handed back for reporting, and gone.
+  EXPECT_FALSE(t.take_stale_detection(10.5).has_value());  // 0.5 s old: max_detection_age is 1 s
+  const auto stale = t.take_stale_detection(100.0);
+  ASSERT_TRUE(stale.has_value());
+  EXPECT_DOUBLE_EQ(stale->stamp, 10.0);
+  EXPECT_FALSE(t.peek(100.0).has_value());
+  EXPECT_FALSE(t.take_stale_detection(100.0).has_value());
   // A newer detection does replace an unused older one.
   t.add_detection(at(0.4), 10.6);
   expect_seed(t.seed_for(10.6), SeedSource::kDetector, 0.4, 10.6);
   EXPECT_FALSE(t.has_fresh_detection(10.6));
+}
+
+TEST(ObjectTrack, TrackingFlagTimesOutAndSameFrameKeepsVelocity) {
+  ObjectTrack t(options(), Eigen::Vector3d::Zero());
+  t.report(at(0.1), true, 10.0);
+  t.report(at(0.2), true, 10.1);
+  EXPECT_TRUE(t.tracking(10.2));
+  EXPECT_FALSE(t.tracking(10.1 + options().track_timeout + 0.01));
+  ASSERT_TRUE(t.predict(10.2).has_value());
+  t.report(at(0.2), true, 10.1);  // the same frame refined again (service after streaming)
+  EXPECT_TRUE(t.predict(10.2).has_value()) << "the velocity was lost";
 }
 
 TEST(ObjectTrack, ResetForgetsEverything) {
