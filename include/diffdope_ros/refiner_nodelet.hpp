@@ -131,6 +131,7 @@ class RefinerNodelet : public nodelet::Nodelet {
   diffdope::TrackOptions track_options_;
   diffdope::RefinerOptions refiner_options_;
   std::unique_ptr<diffdope::Refiner> refiner_;  // the worker's (null after a configuration error)
+  std::unique_ptr<diffdope::Renderer> overlay_renderer_;  // the worker's, for ~overlay
 
   ErrorReporter errors_;
   std::vector<std::unique_ptr<Slot>> slots_;

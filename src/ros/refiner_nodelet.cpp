@@ -111,6 +111,14 @@ void RefinerNodelet::loadObjects() {
     errors_.error("config", std::string("configuration error, no object will be refined: ") + e.what());
     return;
   }
+  if (use_mask_) {  // several objects reading "any nonzero pixel" would all get the union of their masks
+    int any = 0;
+    for (const auto& o : cfg.objects) any += o.mask_label < 0;
+    if (any > 1)
+      errors_.warn("mask_labels", "~use_mask with " + std::to_string(any) +
+                                      " objects without a mask_label: each gets every nonzero mask pixel; give "
+                                      "each object its label");
+  }
   for (size_t i = 0; i < cfg.objects.size(); ++i) {
     auto slot = std::make_unique<Slot>();
     slot->config = cfg.objects[i];

@@ -14,7 +14,8 @@ void RefinerNodelet::publishOverlay(const Frame& frame, const std::vector<size_t
   cv::Mat canvas;
   frame.observation.rgb.convertTo(canvas, CV_8UC3, 255.0);
   cv::cvtColor(canvas, canvas, cv::COLOR_RGB2BGR);
-  auto renderer = diffdope::make_cpu_renderer(refiner_options_.render);
+  if (!overlay_renderer_) overlay_renderer_ = diffdope::make_cpu_renderer(refiner_options_.render);
+  diffdope::Renderer* renderer = overlay_renderer_.get();
   for (size_t k = 0; k < results.size(); ++k) {
     const Slot& s = *slots_[slots[k]];
     const diffdope::RefineResult& r = results[k];

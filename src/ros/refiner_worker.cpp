@@ -43,6 +43,17 @@ void RefinerNodelet::workerLoop() {
         } catch (const std::future_error&) {
         }
       }
+    } catch (...) {  // not a std::exception: still never take the node down, never leave a caller waiting
+      errors_.error("internal", "refinement failed with an unknown exception");
+      if (job) {
+        diffdope_ros::Refine::Response res;
+        res.success = false;
+        res.message = "refinement failed with an unknown exception";
+        try {
+          job->response.set_value(res);
+        } catch (const std::future_error&) {
+        }
+      }
     }
   }
 }
