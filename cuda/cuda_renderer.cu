@@ -22,6 +22,7 @@
 
 #include "../src/core/loss_setup.hpp"
 #include "../src/core/pixel_rect.hpp"
+#include "../src/core/render_image.hpp"
 #include "diffdope/device.hpp"
 #include "diffdope/kernels/edges.hpp"
 #include "diffdope/kernels/pixel_loss.hpp"
@@ -244,14 +245,10 @@ __global__ void loss_kernel(CallParams C, const Hypothesis* H, const PixelAttr* 
     const float* I = C.has_rgb ? I_img + 3 * pix : zero3;
     const float Id = C.has_depth ? D_img[pix] : 0.f;
     const PixelAttr a = post[p];
-    if (S == 0.f && a.cov == 0.f) {
-      if (with_gradient) g_post[p] = PixelAttr{0.f, {0.f, 0.f, 0.f}, 0.f};
-    } else {
-      PixelLossGrad g;
-      const PixelLossValue v = pixel_loss(C.P, S, I, Id, Id > 0.f, a.cov, a.c, a.d, with_gradient ? &g : nullptr);
-      v_rgb = v.rgb, v_depth = v.depth, v_mask = v.mask;
-      if (with_gradient) g_post[p] = PixelAttr{g.cov, {g.c[0], g.c[1], g.c[2]}, g.d};
-    }
+    PixelLossGrad g;
+    const PixelLossValue v = pixel_loss_step(C.P, S, I, Id, a.cov, a.c, a.d, with_gradient ? &g : nullptr);
+    v_rgb = v.rgb, v_depth = v.depth, v_mask = v.mask;
+    if (with_gradient) g_post[p] = PixelAttr{g.cov, {g.c[0], g.c[1], g.c[2]}, g.d};
   }
   warp_add(v_rgb, sums + 4 * h + 0);
   warp_add(v_depth, sums + 4 * h + 1);
@@ -277,14 +274,8 @@ __global__ void edge_kernel(CallParams C, const Hypothesis* H, const float* grey
     const int p = hy.offset + i, lx = i % hy.w, ly = i / hy.w;
     const int pix = (hy.y0 + ly) * C.image_w + hy.x0 + lx;
     const float S = C.has_mask ? S_img[pix] : 1.f;
-    float gsx = 0.f, gsy = 0.f;
-    if (S > 0.f) {
-      float gx, gy;
-      const float e = edge_value(grey + hy.offset, hy.w, hy.h, lx, ly, C.edge_scale, &gx, &gy);
-      v = S * fabsf(E_img[pix] - e);
-      if (with_gradient) edge_value_backward(gx, gy, C.edge_scale, C.k_edges * S * signf(e - E_img[pix]), &gsx, &gsy);
-    }
-    if (with_gradient) g_sx[p] = gsx, g_sy[p] = gsy;
+    v = edge_term_step(grey + hy.offset, hy.w, hy.h, lx, ly, C.edge_scale, S, E_img[pix], C.k_edges,
+                       with_gradient ? g_sx + p : nullptr, with_gradient ? g_sy + p : nullptr);
   }
   warp_add(v, sums + 4 * h + 3);
 }
@@ -553,23 +544,10 @@ std::vector<RenderImage> CudaRenderer::render(const Camera& camera, const Mesh& 
   check(cudaMemcpyAsync(tri.data(), tri_.ptr, sizeof(int) * tri.size(), cudaMemcpyDeviceToHost, stream_), "download");
   check(cudaStreamSynchronize(stream_), "render");
   std::vector<RenderImage> out(poses.size());
-  for (size_t h = 0; h < poses.size(); ++h) {
+  for (size_t h = 0; h < poses.size(); ++h) {  // an invalid hypothesis has a 1-pixel region, left empty
     const Hypothesis& hy = hyp_[h];
-    RenderImage& img = out[h];
-    img.roi = cv::Rect(hy.x0, hy.y0, hy.w, hy.h);
-    img.color = cv::Mat::zeros(camera.height, camera.width, CV_32FC3);
-    img.depth = cv::Mat::zeros(camera.height, camera.width, CV_32FC1);
-    img.coverage = cv::Mat::zeros(camera.height, camera.width, CV_32FC1);
-    img.triangle = cv::Mat(camera.height, camera.width, CV_32SC1, cv::Scalar(-1));
-    if (!hy.valid) continue;
-    for (int i = 0; i < hy.w * hy.h; ++i) {
-      const int p = hy.offset + i, x = hy.x0 + i % hy.w, y = hy.y0 + i / hy.w;
-      const PixelAttr& a = post[p];
-      img.color.at<cv::Vec3f>(y, x) = cv::Vec3f(a.c[0], a.c[1], a.c[2]);
-      img.coverage.at<float>(y, x) = a.cov;
-      img.depth.at<float>(y, x) = tri[p] >= 0 ? pre[p].d : 0.f;
-      img.triangle.at<int>(y, x) = tri[p];
-    }
+    const PixelRect roi{hy.x0, hy.y0, hy.x0 + hy.w, hy.y0 + hy.h};
+    out[h] = make_render_image(camera, roi, pre.data() + hy.offset, post.data() + hy.offset, tri.data() + hy.offset);
   }
   return out;
 }

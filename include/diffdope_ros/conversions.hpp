@@ -19,6 +19,12 @@ namespace diffdope_ros {
 /// binning / ROI settings (not supported: publish full-resolution rectified images).
 diffdope::Camera camera_from_info(const sensor_msgs::CameraInfo& info, std::string* warning = nullptr);
 
+/// Encoding and size checks alone (no pixel is touched): what the input callbacks do before handing a frame
+/// to the worker, which converts it. Same messages as the conversions below.
+void check_rgb_image(const sensor_msgs::Image& image);
+void check_depth_image(const sensor_msgs::Image& image);
+void check_labels_image(const sensor_msgs::Image& image);
+
 /// Colour image -> CV_32FC3 RGB in [0, 1]. Encodings: rgb8, bgr8, rgba8, bgra8, mono8.
 cv::Mat rgb_from_image(const sensor_msgs::Image& image);
 /// Depth image (REP 118) -> CV_32FC1 metres, 0 = no reading. Encodings: 16UC1 / mono16 (millimetres), 32FC1 (m).

@@ -51,14 +51,17 @@ class RefinerNodelet : public nodelet::Nodelet {
  private:
   enum class Mode { kContinuous, kTracking, kOnRequest };
 
-  /// One synchronized, converted input set.
+  /// One synchronized input set. The callback checks it (encodings, sizes, camera_info) and hands the messages
+  /// over; the worker converts the pixels (convertFrame), so frames it skips cost the callbacks nothing.
   struct Frame {
     std_msgs::Header header;  // the RGB image's stamp and optical frame
     diffdope::Camera camera;
+    sensor_msgs::ImageConstPtr rgb_msg, depth_msg, mask_msg;  // depth / mask null when not used
+    ros::WallTime received;
+    // Filled by the worker (the only thread that touches them after the hand-over).
+    bool converted = false;
     diffdope::Observation observation;  // rgb (+ depth); masks are per object
     cv::Mat labels;                     // mask / label image, empty without a mask
-    sensor_msgs::ImageConstPtr rgb_msg; // for the overlay
-    ros::WallTime received;
   };
 
   /// A configured object: its mesh (null when it failed to load: the object is disabled), its track and topics.
@@ -102,6 +105,9 @@ class RefinerNodelet : public nodelet::Nodelet {
 
   // Worker thread.
   void workerLoop();
+  /// Converts the frame's pixels once. Throws std::invalid_argument like the conversions.
+  void convertFrame(Frame& frame);
+  void reportInputError(const std::exception& e);
   void processStreaming(const std::shared_ptr<const Frame>& frame);
   diffdope_ros::Refine::Response processRequest(const diffdope_ros::Refine::Request& req,
                                                 const std::shared_ptr<const Frame>& frame);
@@ -169,7 +175,7 @@ class RefinerNodelet : public nodelet::Nodelet {
   // Hand-over between callbacks and the worker.
   std::mutex work_mutex_;
   std::condition_variable work_cv_;
-  std::shared_ptr<const Frame> latest_frame_;  // newest synchronized frame (kept for service calls)
+  std::shared_ptr<Frame> latest_frame_;  // newest synchronized frame (kept for service calls)
   bool frame_pending_ = false;                 // latest_frame_ not yet processed by streaming
   std::deque<std::shared_ptr<Request>> requests_;
   bool stop_ = false;

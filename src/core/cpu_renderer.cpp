@@ -16,6 +16,7 @@
 #include "diffdope/thread_pool.hpp"
 #include "loss_setup.hpp"
 #include "pixel_rect.hpp"
+#include "render_image.hpp"
 
 namespace diffdope {
 namespace {
@@ -210,22 +211,7 @@ std::vector<RenderImage> CpuRenderer::render(const Camera& camera, const Mesh& m
   pool_.parallel_for(static_cast<int>(poses.size()), [&](int h, int worker) {
     Workspace& ws = workspaces_[worker];
     const Rect roi = rasterize(ctx, poses[h], ws, false);
-    RenderImage& img = out[h];
-    img.roi = cv::Rect(roi.x0, roi.y0, roi.width(), roi.height());
-    img.color = cv::Mat::zeros(camera.height, camera.width, CV_32FC3);
-    img.depth = cv::Mat::zeros(camera.height, camera.width, CV_32FC1);
-    img.coverage = cv::Mat::zeros(camera.height, camera.width, CV_32FC1);
-    img.triangle = cv::Mat(camera.height, camera.width, CV_32SC1, cv::Scalar(-1));
-    for (int y = roi.y0; y < roi.y1; ++y) {
-      for (int x = roi.x0; x < roi.x1; ++x) {
-        const int i = (y - roi.y0) * roi.width() + (x - roi.x0);
-        const PixelAttr& a = ws.post[i];
-        img.color.at<cv::Vec3f>(y, x) = cv::Vec3f(a.c[0], a.c[1], a.c[2]);
-        img.coverage.at<float>(y, x) = a.cov;
-        img.depth.at<float>(y, x) = ws.tri[i] >= 0 ? ws.pre[i].d : 0.f;
-        img.triangle.at<int>(y, x) = ws.tri[i];
-      }
-    }
+    out[h] = make_render_image(camera, roi, ws.pre.data(), ws.post.data(), ws.tri.data());
   });
   return out;
 }
@@ -263,15 +249,10 @@ void CpuRenderer::evaluate(const Camera& camera, const Mesh& mesh, const Observa
         const int i = (y - roi.y0) * W + (x - roi.x0);
         const float S = mrow ? mrow[x] : 1.f;
         const float* I = crow ? crow + 3 * x : kZero3;
-        const float Id = drow ? drow[x] : 0.f;
-        const bool valid = Id > 0.f;  // to_depth_metres maps NaN / negative to 0
+        const float Id = drow ? drow[x] : 0.f;  // to_depth_metres maps NaN / negative to 0: no reading
         const PixelAttr& a = ws.post[i];
-        if (S == 0.f && a.cov == 0.f) {  // background the render does not touch: no loss, no gradient
-          if (with_gradient) ws.g_post[i] = PixelAttr{0.f, {0.f, 0.f, 0.f}, 0.f};
-          continue;
-        }
         PixelLossGrad g;
-        const PixelLossValue v = pixel_loss(P, S, I, Id, valid, a.cov, a.c, a.d, with_gradient ? &g : nullptr);
+        const PixelLossValue v = pixel_loss_step(P, S, I, Id, a.cov, a.c, a.d, with_gradient ? &g : nullptr);
         sum_rgb += v.rgb;
         sum_depth += v.depth;
         sum_mask += v.mask;
@@ -285,22 +266,18 @@ void CpuRenderer::evaluate(const Camera& camera, const Mesh& mesh, const Observa
       ws.grey.resize(N);
       for (int i = 0; i < N; ++i) ws.grey[i] = (ws.post[i].c[0] + ws.post[i].c[1] + ws.post[i].c[2]) / 3.f;
       if (with_gradient) {
-        ws.g_sobel_x.assign(N, 0.f);
-        ws.g_sobel_y.assign(N, 0.f);
+        ws.g_sobel_x.resize(N);  // edge_term_step writes every pixel
+        ws.g_sobel_y.resize(N);
       }
       for (int y = roi.y0; y < roi.y1; ++y) {
         const float* mrow = obs.has_mask() ? obs.mask.ptr<float>(y) : nullptr;
         const float* erow = obs.edges.ptr<float>(y);
         for (int x = roi.x0; x < roi.x1; ++x) {
-          const float S = mrow ? mrow[x] : 1.f;
-          if (!(S > 0.f)) continue;
           const int lx = x - roi.x0, ly = y - roi.y0;
-          float gx, gy;
-          const float e = edge_value(ws.grey.data(), W, H, lx, ly, edge_scale, &gx, &gy);
-          sum_edges += S * std::fabs(erow[x] - e);
-          if (with_gradient)
-            edge_value_backward(gx, gy, edge_scale, k_edges * S * signf(e - erow[x]), &ws.g_sobel_x[ly * W + lx],
-                                &ws.g_sobel_y[ly * W + lx]);
+          const float S = mrow ? mrow[x] : 1.f;
+          sum_edges += edge_term_step(ws.grey.data(), W, H, lx, ly, edge_scale, S, erow[x], k_edges,
+                                      with_gradient ? &ws.g_sobel_x[ly * W + lx] : nullptr,
+                                      with_gradient ? &ws.g_sobel_y[ly * W + lx] : nullptr);
         }
       }
       if (with_gradient)

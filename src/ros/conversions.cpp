@@ -59,11 +59,30 @@ diffdope::Camera camera_from_info(const sensor_msgs::CameraInfo& info, std::stri
   return diffdope::Camera(fx, fy, cx, cy, int(info.width), int(info.height));
 }
 
-cv::Mat rgb_from_image(const sensor_msgs::Image& image) {
+void check_rgb_image(const sensor_msgs::Image& image) {
   const std::string& e = image.encoding;
   if (e != enc::RGB8 && e != enc::BGR8 && e != enc::RGBA8 && e != enc::BGRA8 && e != enc::MONO8)
     throw std::invalid_argument("rgb image: unsupported encoding '" + e + "' (rgb8, bgr8, rgba8, bgra8, mono8)");
   check_size(image, "rgb");
+}
+
+void check_depth_image(const sensor_msgs::Image& image) {
+  const std::string& e = image.encoding;
+  if (e != enc::TYPE_16UC1 && e != enc::MONO16 && e != enc::TYPE_32FC1)
+    throw std::invalid_argument("depth image: unsupported encoding '" + e + "' (16UC1 millimetres, 32FC1 metres)");
+  check_size(image, "depth");
+}
+
+void check_labels_image(const sensor_msgs::Image& image) {
+  const std::string& e = image.encoding;
+  if (e != enc::MONO8 && e != enc::TYPE_8UC1 && e != enc::MONO16 && e != enc::TYPE_16UC1)
+    throw std::invalid_argument("mask image: unsupported encoding '" + e + "' (mono8/8UC1, or mono16/16UC1 labels)");
+  check_size(image, "mask");
+}
+
+cv::Mat rgb_from_image(const sensor_msgs::Image& image) {
+  check_rgb_image(image);
+  const std::string& e = image.encoding;
   cv::Mat m = share(image, "rgb");
   if (e == enc::RGBA8) cv::cvtColor(m, m, cv::COLOR_RGBA2RGB);
   if (e == enc::BGRA8) cv::cvtColor(m, m, cv::COLOR_BGRA2BGR);
@@ -71,21 +90,14 @@ cv::Mat rgb_from_image(const sensor_msgs::Image& image) {
 }
 
 cv::Mat depth_from_image(const sensor_msgs::Image& image) {
-  const std::string& e = image.encoding;
-  double metres_per_unit;
-  if (e == enc::TYPE_16UC1 || e == enc::MONO16) metres_per_unit = 0.001;  // REP 118: uint16 depth is millimetres
-  else if (e == enc::TYPE_32FC1) metres_per_unit = 1.0;
-  else
-    throw std::invalid_argument("depth image: unsupported encoding '" + e + "' (16UC1 millimetres, 32FC1 metres)");
-  check_size(image, "depth");
+  check_depth_image(image);
+  // REP 118: uint16 depth is millimetres, float depth metres.
+  const double metres_per_unit = image.encoding == enc::TYPE_32FC1 ? 1.0 : 0.001;
   return diffdope::to_depth_metres(share(image, "depth"), metres_per_unit, "depth image");
 }
 
 cv::Mat labels_from_image(const sensor_msgs::Image& image) {
-  const std::string& e = image.encoding;
-  if (e != enc::MONO8 && e != enc::TYPE_8UC1 && e != enc::MONO16 && e != enc::TYPE_16UC1)
-    throw std::invalid_argument("mask image: unsupported encoding '" + e + "' (mono8/8UC1, or mono16/16UC1 labels)");
-  check_size(image, "mask");
+  check_labels_image(image);
   return share(image, "mask");
 }
 

@@ -255,7 +255,7 @@ void RefinerNodelet::onImages(const sensor_msgs::ImageConstPtr& rgb, const senso
       throw std::invalid_argument("rgb image is " + std::to_string(rgb->width) + "x" + std::to_string(rgb->height) +
                                   " but camera_info says " + std::to_string(info->width) + "x" +
                                   std::to_string(info->height));
-    frame->observation.rgb = rgb_from_image(*rgb);
+    check_rgb_image(*rgb);
     auto same_size = [&](const sensor_msgs::Image& im, const char* what) {
       if (im.width != rgb->width || im.height != rgb->height)
         throw std::invalid_argument(std::string(what) + " image is " + std::to_string(im.width) + "x" +
@@ -264,15 +264,16 @@ void RefinerNodelet::onImages(const sensor_msgs::ImageConstPtr& rgb, const senso
     };
     if (depth) {
       same_size(*depth, "depth");
-      frame->observation.depth = depth_from_image(*depth);
+      check_depth_image(*depth);
+      frame->depth_msg = depth;
     }
     if (mask) {
       same_size(*mask, "mask");
-      frame->labels = labels_from_image(*mask);
+      check_labels_image(*mask);
+      frame->mask_msg = mask;
     }
   } catch (const std::exception& e) {
-    const std::string what = e.what();  // "<input> image: problem": throttle per input, not one for all
-    errors_.error("input/" + what.substr(0, what.find(':')), "input frame dropped: " + what);
+    reportInputError(e);
     return;
   }
   {
@@ -283,6 +284,11 @@ void RefinerNodelet::onImages(const sensor_msgs::ImageConstPtr& rgb, const senso
     frame_pending_ = mode_ != Mode::kOnRequest;
   }
   work_cv_.notify_one();
+}
+
+void RefinerNodelet::reportInputError(const std::exception& e) {
+  const std::string what = e.what();  // "<input> image: problem": throttle per input, not one for all
+  errors_.error("input/" + what.substr(0, what.find(':')), "input frame dropped: " + what);
 }
 
 void RefinerNodelet::onDetection(const geometry_msgs::PoseStampedConstPtr& msg, size_t slot) {

@@ -11,7 +11,7 @@ namespace diffdope_ros {
 void RefinerNodelet::workerLoop() {
   while (true) {
     std::shared_ptr<Request> job;
-    std::shared_ptr<const Frame> frame;
+    std::shared_ptr<Frame> frame;
     {
       std::unique_lock<std::mutex> lock(work_mutex_);
       work_cv_.wait(lock, [this] { return stop_ || !requests_.empty() || frame_pending_; });
@@ -24,6 +24,25 @@ void RefinerNodelet::workerLoop() {
         frame_pending_ = false;
       }
     }
+    auto answer_failure = [&job](const std::string& why) {  // never leave a caller waiting
+      if (!job) return;
+      diffdope_ros::Refine::Response res;
+      res.success = false;
+      res.message = why;
+      try {
+        job->response.set_value(res);
+      } catch (const std::future_error&) {  // already answered
+      }
+    };
+    if (frame && !frame->converted) {
+      try {
+        convertFrame(*frame);
+      } catch (const std::exception& e) {
+        reportInputError(e);
+        answer_failure(std::string("the latest frame is unusable: ") + e.what());
+        continue;
+      }
+    }
     try {
       if (job) {
         job->response.set_value(processRequest(job->request, frame));
@@ -34,28 +53,19 @@ void RefinerNodelet::workerLoop() {
       }
     } catch (const std::exception& e) {  // a bug guard: the node keeps running and says why
       errors_.error("internal", std::string("refinement failed: ") + e.what());
-      if (job) {
-        diffdope_ros::Refine::Response res;
-        res.success = false;
-        res.message = std::string("refinement failed: ") + e.what();
-        try {
-          job->response.set_value(res);
-        } catch (const std::future_error&) {
-        }
-      }
-    } catch (...) {  // not a std::exception: still never take the node down, never leave a caller waiting
+      answer_failure(std::string("refinement failed: ") + e.what());
+    } catch (...) {  // not a std::exception: still never take the node down
       errors_.error("internal", "refinement failed with an unknown exception");
-      if (job) {
-        diffdope_ros::Refine::Response res;
-        res.success = false;
-        res.message = "refinement failed with an unknown exception";
-        try {
-          job->response.set_value(res);
-        } catch (const std::future_error&) {
-        }
-      }
+      answer_failure("refinement failed with an unknown exception");
     }
   }
+}
+
+void RefinerNodelet::convertFrame(Frame& frame) {
+  frame.observation.rgb = rgb_from_image(*frame.rgb_msg);
+  if (frame.depth_msg) frame.observation.depth = depth_from_image(*frame.depth_msg);
+  if (frame.mask_msg) frame.labels = labels_from_image(*frame.mask_msg);
+  frame.converted = true;
 }
 
 diffdope::Pose RefinerNodelet::meshPoseInCamera(const geometry_msgs::PoseStamped& pose, const Slot& slot,

@@ -45,6 +45,18 @@ DD_HOST_DEVICE void edge_value_backward(float gx, float gy, float scale, float g
   *g_gy = g_edge * dE_dmag * gy / mag;
 }
 
+/// One pixel of the edge term, as both backends run it: S * |E_observed - E_render| at (x, y) of the region's
+/// grey image, and (when g_sx is non-null) dL/d(Sobel x, y) there for a loss weight k; zero outside S.
+DD_HOST_DEVICE float edge_term_step(const float* grey, int W, int H, int x, int y, float scale, float S,
+                                    float observed, float k, float* g_sx, float* g_sy) {
+  if (g_sx) *g_sx = *g_sy = 0.f;
+  if (!(S > 0.f)) return 0.f;
+  float gx, gy;
+  const float e = edge_value(grey, W, H, x, y, scale, &gx, &gy);
+  if (g_sx) edge_value_backward(gx, gy, scale, k * S * signf(e - observed), g_sx, g_sy);
+  return S * fabsf(observed - e);
+}
+
 /// dL/dgrey at (x, y), gathered from the neighbours' dL/d(Sobel x) and dL/d(Sobel y) (W x H arrays).
 DD_HOST_DEVICE float grey_gradient(const float* g_gx, const float* g_gy, int W, int H, int x, int y) {
   float g = 0.f;

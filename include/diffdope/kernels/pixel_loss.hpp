@@ -74,4 +74,15 @@ DD_HOST_DEVICE PixelLossValue pixel_loss(const PixelLossParams& P, float S, cons
   return v;
 }
 
+/// One pixel of the loss pass, as both backends run it: observed background the render does not touch costs
+/// nothing (and has no gradient); anything else goes through pixel_loss. Id <= 0 means no depth reading.
+DD_HOST_DEVICE PixelLossValue pixel_loss_step(const PixelLossParams& P, float S, const float I[3], float Id,
+                                              float cov, const float C[3], float D, PixelLossGrad* g) {
+  if (S == 0.f && cov == 0.f) {
+    if (g) *g = PixelLossGrad{0.f, {0.f, 0.f, 0.f}, 0.f};
+    return PixelLossValue{0.f, 0.f, 0.f};
+  }
+  return pixel_loss(P, S, I, Id, Id > 0.f, cov, C, D, g);
+}
+
 }  // namespace diffdope
