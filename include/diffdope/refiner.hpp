@@ -103,8 +103,10 @@ struct ObjectTarget {
 class Refiner {
  public:
   explicit Refiner(const RefinerOptions& options = RefinerOptions());
+  /// With a renderer of the caller's choosing (options.device is then not used).
+  Refiner(const RefinerOptions& options, std::unique_ptr<Renderer> renderer);
   const RefinerOptions& options() const { return options_; }
-  /// The backend in use ("cpu" or "cuda").
+  /// The backend in use ("cpu", "cuda", or "cuda-emulated").
   std::string backend() const { return renderer_->name(); }
 
   /// Refines one object. `observed` holds the full-resolution images (any of rgb / depth / mask may be

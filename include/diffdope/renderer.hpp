@@ -68,6 +68,14 @@ struct RenderImage {
   cv::Mat triangle;   // CV_32SC1 visible triangle index, -1 where not covered
 };
 
+/// One object of Renderer::evaluate_objects(): its mesh, its own observed mask and loss options, its hypotheses.
+struct ObjectBatch {
+  const Mesh* mesh = nullptr;
+  cv::Mat mask;  // CV_32FC1 of the camera's size, or empty (S = 1)
+  LossOptions loss;
+  std::vector<Pose> poses;
+};
+
 /// A renderer keeps scratch memory between calls: use one instance from one thread at a time (each call
 /// parallelises internally over the hypotheses).
 class Renderer {
@@ -84,6 +92,12 @@ class Renderer {
   virtual void evaluate(const Camera& camera, const Mesh& mesh, const Observation& observed,
                         const std::vector<Pose>& poses, const LossOptions& loss, bool with_gradient,
                         std::vector<LossValue>& out) = 0;
+
+  /// Several objects of one frame at once: `frame` gives the shared rgb / depth / edges (its mask is ignored),
+  /// each object its mask, loss options and poses; out[k] is as evaluate() gives for object k. The default
+  /// calls evaluate() per object; the CUDA backend runs all hypotheses of all objects in each launch.
+  virtual void evaluate_objects(const Camera& camera, const Observation& frame, const std::vector<ObjectBatch>& objects,
+                                bool with_gradient, std::vector<std::vector<LossValue>>& out);
 
  protected:
   explicit Renderer(const RenderOptions& options) : options_(options) {}

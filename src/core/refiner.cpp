@@ -37,6 +37,12 @@ Refiner::Refiner(const RefinerOptions& options) : options_(options) {
   if (!note.empty()) std::call_once(said, [&] { std::fprintf(stderr, "diffdope: %s\n", note.c_str()); });
 }
 
+Refiner::Refiner(const RefinerOptions& options, std::unique_ptr<Renderer> renderer)
+    : options_(options), renderer_(std::move(renderer)) {
+  options_.validate();
+  if (!renderer_) throw std::invalid_argument("Refiner: no renderer");
+}
+
 namespace {
 
 cv::Mat window_mask(const Camera& cam, const Mesh& mesh, const Pose& pose, double grow) {

@@ -1,6 +1,7 @@
-// The CUDA backend against the CPU backend (renders, losses, gradients, refined poses) and against finite
-// differences, plus device selection. Without a CUDA device the equivalence tests are reported as SKIPPED with
-// the reason; the selection tests run everywhere (they check the fallback and the errors).
+// The CUDA backend's batched pipeline against the CPU backend (renders, losses, gradients, refined poses, several
+// objects in one call) and against finite differences, plus device selection. Each test runs twice: on the
+// emulated executor (the same stages on CPU threads: runs everywhere, so CI checks the pipeline) and on a CUDA
+// device, which without one is reported as SKIPPED with the reason.
 #include <gtest/gtest.h>
 
 #include "diffdope/device.hpp"
@@ -13,11 +14,19 @@ using namespace diffdope::test;
 
 namespace {
 
-#define REQUIRE_CUDA()                                                                   \
-  do {                                                                                   \
-    const CudaDeviceInfo info = cuda_device_info();                                      \
-    if (!info.available) GTEST_SKIP() << "no CUDA device: " << info.reason;              \
-  } while (0)
+/// Parameter: "cuda-emulated" or "cuda".
+class BatchedBackend : public ::testing::TestWithParam<std::string> {
+ protected:
+  void SetUp() override {
+    if (GetParam() == "cuda") {
+      const CudaDeviceInfo info = cuda_device_info();
+      if (!info.available) GTEST_SKIP() << "no CUDA device: " << info.reason;
+    }
+  }
+  std::unique_ptr<Renderer> make(const RenderOptions& o = {}) const {
+    return GetParam() == "cuda" ? make_cuda_renderer(o) : make_emulated_cuda_renderer(o);
+  }
+};
 
 struct Case {
   const char* name;
@@ -69,11 +78,10 @@ TEST(DeviceSelection, AutoFallsBackCudaFailsClearly) {
   EXPECT_THROW(bad.validate(), std::invalid_argument);
 }
 
-TEST(CudaBackend, RendersLikeTheCpu) {
-  REQUIRE_CUDA();
+TEST_P(BatchedBackend, RendersLikeTheCpu) {
   const Camera cam = test_camera();
   auto cpu = make_cpu_renderer();
-  auto gpu = make_cuda_renderer();
+  auto gpu = make();
   for (const Case& c : cases()) {
     const auto a = cpu->render(cam, c.mesh, {c.truth, c.test});
     const auto b = gpu->render(cam, c.mesh, {c.truth, c.test});
@@ -86,11 +94,10 @@ TEST(CudaBackend, RendersLikeTheCpu) {
   }
 }
 
-TEST(CudaBackend, LossesAndGradientsMatchTheCpu) {
-  REQUIRE_CUDA();
+TEST_P(BatchedBackend, LossesAndGradientsMatchTheCpu) {
   const Camera cam = test_camera();
   auto cpu = make_cpu_renderer();
-  auto gpu = make_cuda_renderer();
+  auto gpu = make();
   for (const Case& c : cases()) {
     const Observation obs = observe(*cpu, cam, c.mesh, c.truth);
     for (bool with_mask : {true, false}) {
@@ -114,10 +121,9 @@ TEST(CudaBackend, LossesAndGradientsMatchTheCpu) {
   }
 }
 
-TEST(CudaBackend, GradientMatchesFiniteDifferences) {
-  REQUIRE_CUDA();
+TEST_P(BatchedBackend, GradientMatchesFiniteDifferences) {
   const Camera cam = test_camera();
-  auto gpu = make_cuda_renderer();
+  auto gpu = make();
   for (const Case& c : cases()) {
     const Observation obs = observe(*gpu, cam, c.mesh, c.truth);
     std::vector<LossValue> v;
@@ -128,8 +134,7 @@ TEST(CudaBackend, GradientMatchesFiniteDifferences) {
   }
 }
 
-TEST(CudaBackend, RefinesLikeTheCpu) {
-  REQUIRE_CUDA();
+TEST_P(BatchedBackend, RefinesLikeTheCpu) {
   const Camera cam(420, 420, 159.5, 119.5, 320, 240);
   const Mesh mesh = make_l_block(0.12, make_label_texture(256, 31));
   const Pose truth = look_pose(0.7, -0.4, 0.3, 0.01, -0.01, 0.55);
@@ -142,20 +147,18 @@ TEST(CudaBackend, RefinesLikeTheCpu) {
   o.iterations = 40;
   o.image_scale = 1.0;
   const RefineResult a = Refiner(o).refine(cam, obs, mesh, init);
-  o.device = "cuda";
-  Refiner gpu_refiner(o);
-  EXPECT_EQ(gpu_refiner.backend(), "cuda");
+  Refiner gpu_refiner(o, make(o.render));
+  EXPECT_EQ(gpu_refiner.backend(), GetParam());
   const RefineResult b = gpu_refiner.refine(cam, obs, mesh, init);
   EXPECT_LT((a.pose.t - b.pose.t).norm(), 1e-4);
   EXPECT_LT(rotation_angle(a.pose.R, b.pose.R), 0.05 * M_PI / 180);
   EXPECT_NEAR(a.loss.total, b.loss.total, 1e-3 * a.loss.total);
 }
 
-TEST(CudaBackend, EdgeTermMatchesTheCpu) {
-  REQUIRE_CUDA();
+TEST_P(BatchedBackend, EdgeTermMatchesTheCpu) {
   const Camera cam = test_camera();
   auto cpu = make_cpu_renderer();
-  auto gpu = make_cuda_renderer();
+  auto gpu = make();
   LossOptions loss;
   loss.weight_edges = 1.0;
   loss.edge_scale = 4.0;  // as the CPU gradient test of the edge term: a smooth edge map
@@ -170,3 +173,77 @@ TEST(CudaBackend, EdgeTermMatchesTheCpu) {
     EXPECT_LT((a[0].gradient - b[0].gradient).norm() / std::max(a[0].gradient.norm(), 1e-9), 1e-3) << c.name;
   }
 }
+
+// Several objects in one call (each with its own mask, loss options and poses; invalid and empty batches too)
+// give what one call per object gives.
+TEST_P(BatchedBackend, SeveralObjectsInOneCallMatchOneByOne) {
+  const Camera cam = test_camera();
+  auto cpu = make_cpu_renderer();
+  auto gpu = make();
+  const std::vector<Case> cs = cases();
+  Observation frame = observe(*cpu, cam, cs[0].mesh, cs[0].truth);
+  frame.edges = observed_edges(frame.rgb);
+  std::vector<ObjectBatch> objects(cs.size() + 1);
+  for (size_t k = 0; k < cs.size(); ++k) {
+    ObjectBatch& b = objects[k];
+    b.mesh = &cs[k].mesh;
+    if (k != 2) b.mask = observe(*cpu, cam, cs[k].mesh, cs[k].truth).mask;  // the sphere has none
+    b.poses = {cs[k].test, cs[k].truth};
+    if (k == 0) b.loss.weight_edges = 1.0, b.loss.edge_scale = 4.0;
+    if (k == 1) b.loss.weight_depth = 3.0, b.poses.push_back(Pose(Eigen::Matrix3d::Constant(NAN), cs[k].truth.t));
+  }
+  objects[3].mesh = &cs[1].mesh;  // no poses at all
+  std::vector<std::vector<LossValue>> together, reference;
+  gpu->evaluate_objects(cam, frame, objects, true, together);
+  cpu->evaluate_objects(cam, frame, objects, true, reference);
+  ASSERT_EQ(together.size(), objects.size());
+  EXPECT_TRUE(together[3].empty());
+  EXPECT_TRUE(std::isinf(together[1][2].total));
+  for (size_t k = 0; k < cs.size(); ++k) {
+    Observation o = frame;
+    o.mask = objects[k].mask;
+    std::vector<LossValue> alone;
+    gpu->evaluate(cam, *objects[k].mesh, o, objects[k].poses, objects[k].loss, true, alone);
+    ASSERT_EQ(together[k].size(), alone.size());
+    for (size_t h = 0; h < alone.size(); ++h) {
+      SCOPED_TRACE(std::string(cs[k].name) + " pose " + std::to_string(h));
+      if (!std::isfinite(alone[h].total)) {
+        EXPECT_FALSE(std::isfinite(together[k][h].total));
+        continue;
+      }
+      // The same sums in the same order on the emulation; atomics may add them in another order on a device.
+      const double tol = GetParam() == "cuda" ? 1e-9 : 0.0;
+      EXPECT_NEAR(together[k][h].total, alone[h].total, tol * std::max(1.0, alone[h].total));
+      EXPECT_LE((together[k][h].gradient - alone[h].gradient).norm(), 1e-6 * alone[h].gradient.norm());
+      EXPECT_NEAR(together[k][h].total, reference[k][h].total, 1e-5 * std::max(1.0, reference[k][h].total));
+      EXPECT_NEAR(together[k][h].edges, reference[k][h].edges, 1e-5);
+      EXPECT_LT((together[k][h].gradient - reference[k][h].gradient).norm() /
+                    std::max(reference[k][h].gradient.norm(), 1e-9), 1e-3);
+    }
+  }
+}
+
+TEST_P(BatchedBackend, BadInputIsRefusedClearly) {
+  const Camera cam = test_camera();
+  auto gpu = make();
+  const Case c = cases()[0];
+  EXPECT_TRUE(gpu->render(cam, c.mesh, {}).empty());
+  Observation obs = observe(*gpu, cam, c.mesh, c.truth);
+  std::vector<LossValue> v;
+  gpu->evaluate(cam, c.mesh, obs, {Pose(Eigen::Matrix3d::Constant(NAN), c.truth.t), c.truth}, LossOptions(), true, v);
+  ASSERT_EQ(v.size(), 2u);
+  EXPECT_TRUE(std::isinf(v[0].total));
+  std::vector<LossValue> ref;
+  make_cpu_renderer()->evaluate(cam, c.mesh, obs, {c.truth}, LossOptions(), true, ref);
+  EXPECT_NEAR(v[1].total, ref[0].total, 1e-5);
+  Mesh empty;
+  EXPECT_THROW(gpu->evaluate(cam, empty, obs, {c.truth}, LossOptions(), true, v), std::invalid_argument);
+  obs.mask = cv::Mat::ones(10, 10, CV_32F);
+  EXPECT_THROW(gpu->evaluate(cam, c.mesh, obs, {c.truth}, LossOptions(), true, v), std::invalid_argument);
+  EXPECT_THROW(gpu->render(cam, c.mesh, {c.truth}, obs.mask), std::invalid_argument);
+}
+
+INSTANTIATE_TEST_SUITE_P(Executors, BatchedBackend, ::testing::Values("cuda-emulated", "cuda"),
+                         [](const ::testing::TestParamInfo<std::string>& i) {
+                           return i.param == "cuda" ? std::string("Cuda") : std::string("CudaEmulated");
+                         });

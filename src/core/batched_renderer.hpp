@@ -1,0 +1,339 @@
+#pragma once
+// The batched renderer (internal header): every hypothesis of every object of a call goes through each stage
+// of src/core/batched_stages.hpp in one launch. `Exec` says where the stages run:
+//   - CudaExec (cuda/cuda_renderer.cu): device buffers, one stream, one kernel per stage, pinned staging;
+//   - EmulatedExec (src/core/emulated_renderer.cpp): host memory, the same functors on CPU threads.
+// Exec provides:
+//   template <class T> Buffer        grow-only storage: T* reserve(size_t n); T* ptr
+//   upload(Buffer<T>&, const T*, n)  copy in (asynchronous: the host data must live until synchronize())
+//   download(T* host, const T*, n)   copy out (asynchronous)
+//   zero(double*, n)
+//   for_each(n, B, stage)            stage(i, h) for i < n, h < B
+//   reduce(n, B, stage, out, stride) out[stride * h + k] += sum over i of stage(i, h, v)[k], k < Stage::kValues
+//   synchronize(what)                waits for the queued work; throws naming `what` on an error
+//   image(slot, mat)                 an observed CV_32F image on the executor, re-uploaded only when it changed
+//   results(n)                       host memory for n doubles of results (pinned on CUDA)
+//   name()
+#include <algorithm>
+#include <climits>
+#include <cstdint>
+#include <limits>
+#include <map>
+#include <memory>
+#include <stdexcept>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "batched_stages.hpp"
+#include "diffdope/observation.hpp"
+#include "diffdope/renderer.hpp"
+#include "loss_setup.hpp"
+#include "pixel_rect.hpp"
+#include "render_image.hpp"
+
+namespace diffdope {
+namespace batched {
+
+template <class Exec>
+class BatchedRenderer final : public Renderer {
+ public:
+  template <class... Args>
+  explicit BatchedRenderer(const RenderOptions& options, Args&&... args)
+      : Renderer(options), exec_(std::forward<Args>(args)...) {}
+  std::string name() const override { return exec_.name(); }
+
+  std::vector<RenderImage> render(const Camera& camera, const Mesh& mesh, const std::vector<Pose>& poses,
+                                  const cv::Mat& observed_mask) override {
+    if (!observed_mask.empty() && (observed_mask.type() != CV_32FC1 || observed_mask.cols != camera.width ||
+                                   observed_mask.rows != camera.height))
+      throw std::invalid_argument("render: observed mask must be CV_32FC1 of the camera's size");
+    if (poses.empty()) return {};
+    const Call c = forward(camera, {ObjectCall{&mesh, &observed_mask, &poses, nullptr}}, false);
+    const size_t N = size_t(c.pixels);
+    std::vector<PixelAttr> pre(N), post(N);
+    std::vector<int> tri(N);
+    exec_.download(pre.data(), c.p.pre, N);
+    exec_.download(post.data(), c.p.post, N);
+    exec_.download(tri.data(), c.p.tri, N);
+    exec_.synchronize("render");
+    std::vector<RenderImage> out(poses.size());
+    for (size_t h = 0; h < poses.size(); ++h) {  // an invalid hypothesis has a 1-pixel region, left empty
+      const Hypothesis& hy = hyp_[h];
+      const PixelRect roi{hy.x0, hy.y0, hy.x0 + hy.w, hy.y0 + hy.h};
+      out[h] = make_render_image(camera, roi, pre.data() + hy.offset, post.data() + hy.offset, tri.data() + hy.offset);
+    }
+    return out;
+  }
+
+  void evaluate(const Camera& camera, const Mesh& mesh, const Observation& obs, const std::vector<Pose>& poses,
+                const LossOptions& loss, bool with_gradient, std::vector<LossValue>& out) override {
+    obs.validate(camera);
+    check_loss(loss);
+    const LossSetup setup = make_loss_setup(camera, obs, loss);
+    out.assign(poses.size(), LossValue());
+    if (poses.empty()) return;
+    std::vector<LossValue>* outs[1] = {&out};
+    run(camera, obs, {ObjectCall{&mesh, &obs.mask, &poses, &setup}}, with_gradient, outs);
+  }
+
+  void evaluate_objects(const Camera& camera, const Observation& frame, const std::vector<ObjectBatch>& objects,
+                        bool with_gradient, std::vector<std::vector<LossValue>>& out) override {
+    out.assign(objects.size(), {});
+    std::vector<LossSetup> setups(objects.size());
+    std::vector<ObjectCall> calls;
+    std::vector<std::vector<LossValue>*> outs;
+    for (size_t k = 0; k < objects.size(); ++k) {
+      const ObjectBatch& b = objects[k];
+      if (!b.mesh) throw std::invalid_argument("evaluate_objects: object " + std::to_string(k) + " has no mesh");
+      Observation o;
+      o.rgb = frame.rgb, o.depth = frame.depth, o.edges = frame.edges, o.mask = b.mask;
+      o.validate(camera);
+      check_loss(b.loss);
+      setups[k] = make_loss_setup(camera, o, b.loss);
+      out[k].assign(b.poses.size(), LossValue());
+      if (b.poses.empty()) continue;
+      calls.push_back(ObjectCall{b.mesh, &b.mask, &b.poses, &setups[k]});
+      outs.push_back(&out[k]);
+    }
+    if (!calls.empty()) run(camera, frame, calls, with_gradient, outs.data());
+  }
+
+ private:
+  struct ObjectCall {
+    const Mesh* mesh;
+    const cv::Mat* mask;
+    const std::vector<Pose>* poses;
+    const LossSetup* setup;  // nullptr: render()
+  };
+  struct Call {
+    Pipeline p;
+    int B, pixels, max_vertices, max_triangles, max_pixels;
+  };
+
+  /// A mesh's arrays and textures on the executor.
+  struct ExecMesh {
+    typename Exec::template Buffer<Vec3f> positions, colors;
+    typename Exec::template Buffer<Vec2f> uvs;
+    typename Exec::template Buffer<int> triangles, tri_texture, neighbors, opposite;
+    typename Exec::template Buffer<unsigned char> seams;
+    typename Exec::template Buffer<float> tri_uv_area;
+    std::vector<std::unique_ptr<typename Exec::template Buffer<float>>> texels;  // one per texture level
+    typename Exec::template Buffer<TextureView> textures;
+    // What the upload was made from (the cache is keyed by the Mesh's address, which a new mesh may reuse).
+    const void* positions_host = nullptr;
+    Vec3f first{}, last{};
+    MeshView view{};
+  };
+
+  static void check_loss(const LossOptions& loss) {
+    if (!(loss.depth_truncation > 0)) throw std::invalid_argument("loss: depth_truncation must be > 0");
+  }
+
+  const MeshView& upload_mesh(const Mesh& mesh) {
+    if (mesh.num_triangles() == 0 || mesh.neighbors().size() != mesh.triangles.size())
+      throw std::invalid_argument("renderer: mesh '" + mesh.name + "' is empty or not finalized");
+    auto& slot = meshes_[&mesh];
+    // Keyed by the Mesh's address; counts, the positions' storage and two vertices confirm it is the same mesh
+    // (a new mesh at a reused address is uploaded again).
+    const auto same = [](Vec3f a, Vec3f b) { return a.x == b.x && a.y == b.y && a.z == b.z; };
+    if (slot && slot->view.num_vertices == mesh.num_vertices() && slot->view.num_triangles == mesh.num_triangles() &&
+        slot->positions_host == mesh.positions.data() && same(slot->first, mesh.positions.front()) &&
+        same(slot->last, mesh.positions.back()))
+      return slot->view;
+    slot = std::make_unique<ExecMesh>();
+    ExecMesh& d = *slot;
+    std::vector<TextureView> host_views;
+    const MeshView h = mesh.view(host_views);
+    exec_.upload(d.positions, h.positions, h.num_vertices);
+    exec_.upload(d.colors, h.colors, h.num_vertices);
+    if (h.uvs) exec_.upload(d.uvs, h.uvs, h.num_vertices);
+    exec_.upload(d.triangles, h.triangles, 3 * size_t(h.num_triangles));
+    exec_.upload(d.tri_texture, h.tri_texture, h.num_triangles);
+    exec_.upload(d.neighbors, h.neighbors, 3 * size_t(h.num_triangles));
+    exec_.upload(d.opposite, h.opposite, 3 * size_t(h.num_triangles));
+    exec_.upload(d.seams, h.seams, 3 * size_t(h.num_triangles));
+    exec_.upload(d.tri_uv_area, h.tri_uv_area, h.num_triangles);
+    std::vector<TextureView> exec_views = host_views;
+    for (size_t t = 0; t < host_views.size(); ++t)
+      for (int l = 0; l < host_views[t].levels; ++l) {
+        const TextureLevelView& lv = host_views[t].level[l];
+        d.texels.push_back(std::make_unique<typename Exec::template Buffer<float>>());
+        exec_.upload(*d.texels.back(), lv.rgb, 3 * size_t(lv.width) * lv.height);
+        exec_views[t].level[l].rgb = d.texels.back()->ptr;
+      }
+    if (!exec_views.empty()) exec_.upload(d.textures, exec_views.data(), exec_views.size());
+    exec_.synchronize("mesh upload");  // host_views / exec_views are about to go away
+    d.positions_host = mesh.positions.data();
+    d.first = mesh.positions.front();
+    d.last = mesh.positions.back();
+    d.view = h;
+    d.view.positions = d.positions.ptr;
+    d.view.colors = d.colors.ptr;
+    d.view.uvs = h.uvs ? d.uvs.ptr : nullptr;
+    d.view.triangles = d.triangles.ptr;
+    d.view.tri_texture = d.tri_texture.ptr;
+    d.view.neighbors = d.neighbors.ptr;
+    d.view.opposite = d.opposite.ptr;
+    d.view.seams = d.seams.ptr;
+    d.view.tri_uv_area = d.tri_uv_area.ptr;
+    d.view.textures = exec_views.empty() ? nullptr : d.textures.ptr;
+    return d.view;
+  }
+
+  /// Forward stages (vertices .. blends) for every hypothesis of every object; fills hyp_ and the buffers.
+  /// Evaluating (a loss setup per object): S = 1 without a mask and a non-rotation pose gets no work and an
+  /// infinite loss; rendering: only non-finite poses are skipped, as the CPU backend does.
+  Call forward(const Camera& camera, const std::vector<ObjectCall>& objects, bool evaluating) {
+    camera.validate();
+    Call c{};
+    Pipeline& p = c.p;
+    p.K = camera.intrinsics();
+    p.near_z = static_cast<float>(options_.near_plane);
+    p.image_w = camera.width;
+    p.image_h = camera.height;
+
+    object_params_.resize(objects.size());
+    size_t B = 0;
+    for (const ObjectCall& o : objects) B += o.poses->size();
+    if (B > 65535) throw std::invalid_argument("batched renderer: too many hypotheses in one call");
+    hyp_.resize(B);
+    int64_t pixels = 0, vertices = 0, triangles = 0;
+    c.max_pixels = 1;
+    size_t h = 0;
+    for (size_t k = 0; k < objects.size(); ++k) {
+      const Mesh& mesh = *objects[k].mesh;
+      ObjectParams& op = object_params_[k];
+      op = ObjectParams{};
+      op.M = upload_mesh(mesh);
+      op.nv = mesh.num_vertices();
+      op.nt = mesh.num_triangles();
+      op.cull = options_.cull_back_faces || (options_.auto_cull_closed && mesh.closed_and_outward());
+      c.max_vertices = std::max(c.max_vertices, op.nv);
+      c.max_triangles = std::max(c.max_triangles, op.nt);
+      const PixelRect box = mask_box(*objects[k].mask, camera.width, camera.height, evaluating);
+      for (const Pose& q : *objects[k].poses) {
+        Hypothesis& hy = hyp_[h++];
+        hy.valid = (evaluating ? q.is_valid(1e-3) : (q.R.allFinite() && q.t.allFinite())) ? 1 : 0;
+        const PixelRect roi = hy.valid ? hypothesis_roi(camera, mesh, q, p.near_z, box,
+                                                        std::max(1, options_.roi_margin), options_.use_roi)
+                                       : PixelRect{0, 0, 1, 1};
+        hy.T = q.to_kernel();
+        hy.x0 = roi.x0, hy.y0 = roi.y0, hy.w = roi.width(), hy.h = roi.height();
+        hy.object = int(k);
+        hy.offset = static_cast<int>(pixels);
+        hy.vertex_offset = static_cast<int>(vertices);
+        hy.triangle_offset = static_cast<int>(triangles);
+        pixels += int64_t(hy.w) * hy.h;
+        vertices += op.nv;
+        triangles += op.nt;
+        // Indices (and the 2 * pixel event slots) are ints on the device.
+        if (pixels > INT_MAX / 2 || vertices > INT_MAX || triangles > INT_MAX)
+          throw std::invalid_argument("batched renderer: too many pixels or vertices in one call (" +
+                                      std::to_string(B) + " hypotheses); use smaller batches, images or a mask");
+        c.max_pixels = std::max(c.max_pixels, hy.w * hy.h);
+      }
+    }
+    c.B = int(B);
+    c.pixels = int(pixels);
+    const size_t N = size_t(pixels);
+    exec_.upload(d_hyp_, hyp_.data(), B);
+    p.H = d_hyp_.ptr;
+    p.cam = cam_.reserve(size_t(vertices));
+    p.pix = pix_.reserve(size_t(vertices));
+    p.area = area_.reserve(size_t(triangles));
+    p.level = level_.reserve(size_t(triangles));
+    p.key = key_.reserve(N);
+    p.tri = tri_.reserve(N);
+    p.pre = pre_.reserve(N);
+    p.post = post_.reserve(N);
+    p.bary = bary_.reserve(N);
+    p.events = events_.reserve(2 * N);
+    p.has_event = has_event_.reserve(2 * N);
+
+    for (size_t k = 0; k < objects.size(); ++k) {  // loss constants and masks: evaluation only
+      const LossSetup* s = objects[k].setup;
+      if (!s) continue;
+      ObjectParams& op = object_params_[k];
+      op.P = s->P;
+      op.S = s->has_mask ? exec_.image(3 + int(k), *objects[k].mask) : nullptr;
+      op.k_edges = s->k_edges;
+      op.edge_scale = s->edge_scale;
+    }
+    exec_.upload(d_objects_, object_params_.data(), object_params_.size());
+    p.objects = d_objects_.ptr;
+
+    exec_.for_each(c.max_vertices, c.B, VertexStage{p});
+    exec_.for_each(c.max_triangles, c.B, TriangleStage{p});
+    exec_.for_each(c.max_pixels, c.B, ClearStage{p});
+    exec_.for_each(c.max_triangles, c.B, RasterStage{p});
+    exec_.for_each(c.max_pixels, c.B, ShadeStage{p});
+    exec_.for_each(c.max_pixels, c.B, BlendDetectStage{p});
+    exec_.for_each(c.max_pixels, c.B, BlendApplyStage{p});
+    return c;
+  }
+
+  /// Forward, loss and (with_gradient) backward for the objects; outs[k] receives object k's values.
+  void run(const Camera& camera, const Observation& frame, const std::vector<ObjectCall>& objects, bool with_gradient,
+           std::vector<LossValue>* const* outs) {
+    Call c = forward(camera, objects, true);
+    Pipeline& p = c.p;
+    p.I = frame.has_rgb() ? exec_.image(0, frame.rgb) : nullptr;
+    p.D = frame.has_depth() ? exec_.image(1, frame.depth) : nullptr;
+    bool edges = false;
+    for (const ObjectCall& o : objects) edges = edges || o.setup->k_edges != 0.f;
+    p.E = edges ? exec_.image(2, frame.edges) : nullptr;
+    p.with_gradient = with_gradient ? 1 : 0;
+    const size_t B = size_t(c.B), N = size_t(c.pixels);
+    out_.reserve(10 * B);
+    exec_.zero(out_.ptr, 10 * B);
+    if (with_gradient) p.g_post = g_post_.reserve(N);
+    exec_.reduce(c.max_pixels, c.B, LossStage{p}, out_.ptr, 4);
+    if (edges) {  // the edge term, as the CPU backend computes it, after the per-pixel terms
+      p.grey = grey_.reserve(N);
+      if (with_gradient) p.g_sx = g_sx_.reserve(N), p.g_sy = g_sy_.reserve(N);
+      exec_.for_each(c.max_pixels, c.B, GreyStage{p});
+      exec_.reduce(c.max_pixels, c.B, EdgeStage{p}, out_.ptr + 3, 4);
+      if (with_gradient) exec_.for_each(c.max_pixels, c.B, EdgeGatherStage{p});
+    }
+    if (with_gradient) exec_.reduce(c.max_pixels, c.B, BackwardStage{p}, out_.ptr + 4 * B, 6);
+    double* host = exec_.results(10 * B);
+    exec_.download(host, out_.ptr, 10 * B);
+    exec_.synchronize("evaluate");
+    size_t h = 0;
+    for (size_t k = 0; k < objects.size(); ++k) {
+      std::vector<LossValue>& out = *outs[k];
+      for (size_t j = 0; j < out.size(); ++j, ++h) {
+        LossValue& res = out[j];
+        if (!hyp_[h].valid) {
+          res.rgb = res.depth = res.mask = res.total = std::numeric_limits<double>::infinity();
+          continue;
+        }
+        const double* s = host + 4 * h;
+        finish_loss(*objects[k].setup, s[0], s[1], s[2], s[3], &res);
+        if (with_gradient)
+          for (int g = 0; g < 6; ++g) res.gradient[g] = host[4 * B + 6 * h + g];
+      }
+    }
+  }
+
+  Exec exec_;
+  std::map<const Mesh*, std::unique_ptr<ExecMesh>> meshes_;
+  std::vector<Hypothesis> hyp_;
+  std::vector<ObjectParams> object_params_;
+  typename Exec::template Buffer<Hypothesis> d_hyp_;
+  typename Exec::template Buffer<ObjectParams> d_objects_;
+  typename Exec::template Buffer<Vec3f> cam_;
+  typename Exec::template Buffer<Vec2f> pix_;
+  typename Exec::template Buffer<float> area_, level_, grey_, g_sx_, g_sy_;
+  typename Exec::template Buffer<unsigned long long> key_;
+  typename Exec::template Buffer<int> tri_;
+  typename Exec::template Buffer<PixelAttr> pre_, post_, g_post_;
+  typename Exec::template Buffer<detail::ShadeBary> bary_;
+  typename Exec::template Buffer<BlendEvent> events_;
+  typename Exec::template Buffer<unsigned char> has_event_;
+  typename Exec::template Buffer<double> out_;
+};
+
+}  // namespace batched
+}  // namespace diffdope

@@ -1,0 +1,330 @@
+#pragma once
+// The stages of the batched renderer (internal header): one DD_HOST_DEVICE functor per stage, called for every
+// (element i, hypothesis h) of a call. The CUDA backend (cuda/cuda_renderer.cu) launches each as one kernel
+// over all hypotheses of all objects; the emulated executor (src/core/emulated_renderer.cpp) runs the very same
+// functors on CPU threads, so CI checks this pipeline (packing, z-buffer keys, event slots, reductions) against
+// the CPU backend without a GPU. The maths inside each stage is include/diffdope/kernels/.
+//
+// Layout: hypothesis h has a region of interest of w * h pixels stored row by row from `offset` in the packed
+// pixel buffers, its projected vertices from `vertex_offset` and triangles from `triangle_offset`. Every write
+// of a stage for hypothesis h lands in h's own ranges, which is what lets the emulation run hypotheses on
+// different threads with plain memory operations.
+#include <cstring>
+
+#include "diffdope/kernels/edges.hpp"
+#include "diffdope/kernels/pixel_loss.hpp"
+#include "diffdope/kernels/raster.hpp"
+#include "diffdope/kernels/shade.hpp"
+#include "diffdope/kernels/silhouette.hpp"
+#include "diffdope/kernels/vertex_stage.hpp"
+
+namespace diffdope {
+namespace batched {
+
+/// One object of a call: its mesh on the executor and, when evaluating, its loss constants and mask.
+struct ObjectParams {
+  MeshView M;
+  int nv, nt;
+  int cull;
+  PixelLossParams P;
+  const float* S;  // observed mask (image size), nullptr: S = 1
+  float k_edges;   // the paper's edge term weight / normaliser (0: off)
+  float edge_scale;
+};
+
+/// Per-hypothesis constants of one call.
+struct Hypothesis {
+  RigidTransform T;
+  int x0, y0, w, h;     // region of interest
+  int offset;           // first pixel of the region in the packed pixel buffers
+  int valid;            // 0: NaN / non-rotation pose (infinite loss, no work)
+  int object;           // index into the call's objects
+  int vertex_offset;    // first projected vertex in cam / pix
+  int triangle_offset;  // first triangle in area / level
+};
+
+/// Everything a stage reads or writes (pointers are executor memory).
+struct Pipeline {
+  const ObjectParams* objects;
+  const Hypothesis* H;
+  Intrinsics K;
+  float near_z;
+  int image_w, image_h;
+  const float *I, *D, *E;  // observed rgb (3 floats per pixel), depth, edges; nullptr when absent
+  int with_gradient;
+  Vec3f* cam;
+  Vec2f* pix;
+  float *area, *level;
+  unsigned long long* key;  // z-buffer: (depth bits << 32) | triangle
+  int* tri;
+  PixelAttr *pre, *post, *g_post;
+  detail::ShadeBary* bary;
+  BlendEvent* events;  // slot 2 * pixel + dir (0: right neighbour, 1: lower)
+  unsigned char* has_event;
+  float *grey, *g_sx, *g_sy;
+};
+
+constexpr unsigned long long kEmptyKey = ~0ull;
+
+/// Keeps the smaller key: an atomic on the device; on the host each hypothesis runs on one thread.
+DD_HOST_DEVICE void key_min(unsigned long long* slot, unsigned long long v) {
+#if defined(__CUDA_ARCH__)
+  atomicMin(slot, v);
+#else
+  if (v < *slot) *slot = v;
+#endif
+}
+
+DD_HOST_DEVICE unsigned float_bits(float f) {
+#if defined(__CUDA_ARCH__)
+  return __float_as_uint(f);
+#else
+  unsigned u;
+  std::memcpy(&u, &f, sizeof u);
+  return u;
+#endif
+}
+
+DD_HOST_DEVICE int imin(int a, int b) { return a < b ? a : b; }
+DD_HOST_DEVICE int imax(int a, int b) { return a > b ? a : b; }
+
+DD_HOST_DEVICE ProjectedView projected(const Pipeline& p, const Hypothesis& hy) {
+  return ProjectedView{p.cam + hy.vertex_offset, p.pix + hy.vertex_offset, p.area + hy.triangle_offset,
+                       p.level + hy.triangle_offset};
+}
+
+/// i: vertex.
+struct VertexStage {
+  Pipeline p;
+  DD_HOST_DEVICE void operator()(int i, int h) const {
+    const Hypothesis& hy = p.H[h];
+    const ObjectParams& o = p.objects[hy.object];
+    if (i >= o.nv || !hy.valid) return;
+    vertex_setup(o.M, hy.T, p.K, p.near_z, i, p.cam + hy.vertex_offset, p.pix + hy.vertex_offset);
+  }
+};
+
+/// i: triangle. Screen area (0: culled / clipped) and mip level.
+struct TriangleStage {
+  Pipeline p;
+  DD_HOST_DEVICE void operator()(int t, int h) const {
+    const Hypothesis& hy = p.H[h];
+    const ObjectParams& o = p.objects[hy.object];
+    if (t >= o.nt) return;
+    float* a = p.area + hy.triangle_offset;
+    if (!hy.valid) {
+      a[t] = 0.f;
+      return;
+    }
+    a[t] = triangle_setup(o.M, p.cam + hy.vertex_offset, p.pix + hy.vertex_offset, p.near_z, o.cull != 0, t);
+    p.level[hy.triangle_offset + t] = triangle_mip_level(o.M, t, a[t]);
+  }
+};
+
+/// i: pixel of the region.
+struct ClearStage {
+  Pipeline p;
+  DD_HOST_DEVICE void operator()(int i, int h) const {
+    const Hypothesis& hy = p.H[h];
+    if (i < hy.w * hy.h) p.key[hy.offset + i] = kEmptyKey;
+  }
+};
+
+/// i: triangle. Walks the triangle's pixels in the region and keeps the nearest per pixel with key_min on
+/// (depth bits, triangle): depths are positive, so their float bits order like the floats, and ties keep the
+/// lower triangle index, as the CPU's scan does.
+struct RasterStage {
+  Pipeline p;
+  DD_HOST_DEVICE void operator()(int t, int h) const {
+    const Hypothesis& hy = p.H[h];
+    const ObjectParams& o = p.objects[hy.object];
+    if (t >= o.nt || !hy.valid || p.area[hy.triangle_offset + t] == 0.f) return;
+    const Vec2f* P = p.pix + hy.vertex_offset;
+    const Vec3f* X = p.cam + hy.vertex_offset;
+    const int* v = o.M.triangles + 3 * t;
+    const Vec2f s[3] = {P[v[0]], P[v[1]], P[v[2]]};
+    const float z[3] = {X[v[0]].z, X[v[1]].z, X[v[2]].z};
+    TriangleRaster R;
+    if (!triangle_raster_setup(s, z, &R)) return;
+    const int xs = imax(hy.x0, R.x0), xe = imin(hy.x0 + hy.w - 1, R.x1);
+    const int ys = imax(hy.y0, R.y0), ye = imin(hy.y0 + hy.h - 1, R.y1);
+    for (int y = ys; y <= ye; ++y) {
+      long long e[3];
+      raster_edges_at(R, xs, y, e);
+      for (int x = xs; x <= xe; ++x, e[0] += R.dx[0], e[1] += R.dx[1], e[2] += R.dx[2]) {
+        if (!raster_inside(R, e)) continue;
+        const float zp = raster_depth(R, e);
+        if (!(zp < INFINITY)) continue;  // as the CPU's zp < +inf test
+        const unsigned long long k = (static_cast<unsigned long long>(float_bits(zp)) << 32) | unsigned(t);
+        key_min(p.key + hy.offset + (y - hy.y0) * hy.w + (x - hy.x0), k);
+      }
+    }
+  }
+};
+
+/// i: pixel. Visible triangle and shading (barycentrics kept for the backward pass); post starts as pre.
+struct ShadeStage {
+  Pipeline p;
+  DD_HOST_DEVICE void operator()(int i, int h) const {
+    const Hypothesis& hy = p.H[h];
+    if (i >= hy.w * hy.h) return;
+    const int q = hy.offset + i;
+    const unsigned long long k = p.key[q];
+    const int t = k == kEmptyKey ? -1 : int(k & 0xffffffffu);
+    p.tri[q] = t;
+    PixelAttr a{0.f, {0.f, 0.f, 0.f}, 0.f};
+    if (t >= 0) {
+      Vec3f c;
+      float d;
+      shade_pixel(p.objects[hy.object].M, projected(p, hy), p.K, t, float(hy.x0 + i % hy.w),
+                  float(hy.y0 + i / hy.w), &c, &d, false, &p.bary[q]);
+      a = PixelAttr{1.f, {c.x, c.y, c.z}, d};
+    }
+    p.pre[q] = a;
+    p.post[q] = a;
+  }
+};
+
+/// i: pixel. The discontinuity between the pixel and its right (dir 0) / lower (dir 1) neighbour, if any, into
+/// slot 2 * pixel + dir; `to` is a packed-buffer index.
+struct BlendDetectStage {
+  Pipeline p;
+  DD_HOST_DEVICE void operator()(int i, int h) const {
+    const Hypothesis& hy = p.H[h];
+    if (i >= hy.w * hy.h) return;
+    const int lx = i % hy.w, ly = i / hy.w, a = hy.offset + i;
+    const ProjectedView G = projected(p, hy);
+    const MeshView& M = p.objects[hy.object].M;
+    const Vec2f pa{float(hy.x0 + lx), float(hy.y0 + ly)};
+    for (int dir = 0; dir < 2; ++dir) {
+      p.has_event[2 * a + dir] = 0;
+      const bool horizontal = dir == 0;
+      if (horizontal ? lx + 1 >= hy.w : ly + 1 >= hy.h) continue;
+      const int b = horizontal ? a + 1 : a + hy.w;
+      if (p.tri[a] == p.tri[b]) continue;
+      const Vec2f pb = horizontal ? Vec2f{pa.x + 1.f, pa.y} : Vec2f{pa.x, pa.y + 1.f};
+      BlendEvent ev;
+      if (discontinuity_blend(M, G, p.K, a, p.tri[a], p.pre[a].d, pa, b, p.tri[b], p.pre[b].d, pb, horizontal, &ev)) {
+        p.events[2 * a + dir] = ev;
+        p.has_event[2 * a + dir] = 1;
+      }
+    }
+  }
+};
+
+/// The (up to four) event slots that can target pixel q, in the CPU's scan order (pixels row by row, each
+/// pixel's horizontal pair before its vertical one): upper neighbour's vertical, left neighbour's horizontal,
+/// then q's own two. So blended attributes add up in the same order as on the CPU.
+DD_HOST_DEVICE int event_slots(const Hypothesis& hy, int i, int q, int slots[4]) {
+  const int lx = i % hy.w, ly = i / hy.w;
+  int n = 0;
+  if (ly > 0) slots[n++] = 2 * (q - hy.w) + 1;
+  if (lx > 0) slots[n++] = 2 * (q - 1);
+  slots[n++] = 2 * q;
+  slots[n++] = 2 * q + 1;
+  return n;
+}
+
+/// i: pixel. Applies the blends that reach it.
+struct BlendApplyStage {
+  Pipeline p;
+  DD_HOST_DEVICE void operator()(int i, int h) const {
+    const Hypothesis& hy = p.H[h];
+    if (i >= hy.w * hy.h) return;
+    const int q = hy.offset + i;
+    int slots[4];
+    const int n = event_slots(hy, i, q, slots);
+    PixelAttr out = p.post[q];
+    for (int k = 0; k < n; ++k)
+      if (p.has_event[slots[k]] && p.events[slots[k]].to == q) apply_blend(p.events[slots[k]], p.pre[q], &out);
+    p.post[q] = out;
+  }
+};
+
+/// i: pixel; reduced per hypothesis into (rgb, depth, mask). Also dL/d(post) when with_gradient.
+struct LossStage {
+  Pipeline p;
+  static constexpr int kValues = 3;
+  DD_HOST_DEVICE void operator()(int i, int h, double* v) const {
+    const Hypothesis& hy = p.H[h];
+    if (i >= hy.w * hy.h || !hy.valid) return;
+    const ObjectParams& o = p.objects[hy.object];
+    const int q = hy.offset + i;
+    const int pix = (hy.y0 + i / hy.w) * p.image_w + hy.x0 + i % hy.w;
+    const float S = o.S ? o.S[pix] : 1.f;
+    const float zero3[3] = {0.f, 0.f, 0.f};
+    const float* I = p.I ? p.I + 3 * pix : zero3;
+    const float Id = p.D ? p.D[pix] : 0.f;
+    const PixelAttr a = p.post[q];
+    PixelLossGrad g;
+    const PixelLossValue r = pixel_loss_step(o.P, S, I, Id, a.cov, a.c, a.d, p.with_gradient ? &g : nullptr);
+    v[0] = r.rgb, v[1] = r.depth, v[2] = r.mask;
+    if (p.with_gradient) p.g_post[q] = PixelAttr{g.cov, {g.c[0], g.c[1], g.c[2]}, g.d};
+  }
+};
+
+/// Edge term, stage 1, i: pixel. The render's grey image (mean of the blended colour).
+struct GreyStage {
+  Pipeline p;
+  DD_HOST_DEVICE void operator()(int i, int h) const {
+    const Hypothesis& hy = p.H[h];
+    if (i >= hy.w * hy.h) return;
+    const PixelAttr& a = p.post[hy.offset + i];
+    p.grey[hy.offset + i] = (a.c[0] + a.c[1] + a.c[2]) / 3.f;
+  }
+};
+
+/// Edge term, stage 2, i: pixel; reduced per hypothesis. |observed edges - rendered Sobel edges| over S, and
+/// dL/d(Sobel responses) when with_gradient.
+struct EdgeStage {
+  Pipeline p;
+  static constexpr int kValues = 1;
+  DD_HOST_DEVICE void operator()(int i, int h, double* v) const {
+    const Hypothesis& hy = p.H[h];
+    const ObjectParams& o = p.objects[hy.object];
+    if (i >= hy.w * hy.h || !hy.valid || o.k_edges == 0.f) return;
+    const int q = hy.offset + i, lx = i % hy.w, ly = i / hy.w;
+    const int pix = (hy.y0 + ly) * p.image_w + hy.x0 + lx;
+    const float S = o.S ? o.S[pix] : 1.f;
+    v[0] = edge_term_step(p.grey + hy.offset, hy.w, hy.h, lx, ly, o.edge_scale, S, p.E[pix], o.k_edges,
+                          p.with_gradient ? p.g_sx + q : nullptr, p.with_gradient ? p.g_sy + q : nullptr);
+  }
+};
+
+/// Edge term, stage 3, i: pixel. Gathers the Sobel gradients into the pixel's colour gradient.
+struct EdgeGatherStage {
+  Pipeline p;
+  DD_HOST_DEVICE void operator()(int i, int h) const {
+    const Hypothesis& hy = p.H[h];
+    if (i >= hy.w * hy.h || !hy.valid || p.objects[hy.object].k_edges == 0.f) return;
+    const float g = grey_gradient(p.g_sx + hy.offset, p.g_sy + hy.offset, hy.w, hy.h, i % hy.w, i / hy.w) / 3.f;
+    for (int ch = 0; ch < 3; ++ch) p.g_post[hy.offset + i].c[ch] += g;
+  }
+};
+
+/// Backward, i: pixel; reduced per hypothesis into the 6-D pose gradient. The blends that reached the pixel
+/// (into its pre-blend gradient and the silhouette gradient), then its shading.
+struct BackwardStage {
+  Pipeline p;
+  static constexpr int kValues = 6;
+  DD_HOST_DEVICE void operator()(int i, int h, double* g6) const {
+    const Hypothesis& hy = p.H[h];
+    if (i >= hy.w * hy.h || !hy.valid) return;
+    const MeshView& M = p.objects[hy.object].M;
+    const int q = hy.offset + i;
+    const ProjectedView G = projected(p, hy);
+    PixelAttr g_pre = p.g_post[q];
+    int slots[4];
+    const int n = event_slots(hy, i, q, slots);
+    for (int k = 0; k < n; ++k)
+      if (p.has_event[slots[k]] && p.events[slots[k]].to == q)
+        blend_backward(M, G, p.K, p.events[slots[k]], p.pre[q], p.g_post[q], &g_pre, g6);
+    const int t = p.tri[q];
+    if (t >= 0 && (g_pre.c[0] != 0.f || g_pre.c[1] != 0.f || g_pre.c[2] != 0.f || g_pre.d != 0.f))
+      shade_pixel_backward(M, G, p.K, t, float(hy.x0 + i % hy.w), float(hy.y0 + i / hy.w),
+                           Vec3f{g_pre.c[0], g_pre.c[1], g_pre.c[2]}, g_pre.d, g6, false, &p.bary[q]);
+  }
+};
+
+}  // namespace batched
+}  // namespace diffdope
