@@ -82,7 +82,7 @@ struct RefineResult {
   int winner = -1;
   int start = 0;                      // index of the initial pose the winning run started from
   int iterations = 0;                 // iterations actually run (early stop)
-  double time_ms = 0;                 // wall time of refine()
+  double time_ms = 0;                 // wall time of refine() (refine_all(): from the call's start to this object's end)
   // Quality scores at the refined pose (at the refiner's image scale).
   double mask_iou = -1;               // IoU of rendered and observed masks; -1 without a mask
   double depth_inliers = -1;          // fraction of object pixels (observed mask, else the render's) with a depth
@@ -121,7 +121,9 @@ class Refiner {
 
   /// Refines every object of one frame (the frame's rgb and depth, each object's own mask). An object whose
   /// input is unusable gets its reason in RefineResult::error (pose = initial, plausible = false); the others
-  /// are still refined. Objects run one after the other, each using all threads over its B runs.
+  /// are still refined. The objects run in lockstep: each iteration evaluates the runs of all objects in one
+  /// renderer call (one launch per stage on CUDA; one object after the other on the CPU, each using all threads).
+  /// Each result is what refine() would give for that object alone; on_iteration is not called.
   std::vector<RefineResult> refine_all(const Camera& camera, const Observation& frame,
                                        const std::vector<ObjectTarget>& objects);
 

@@ -16,6 +16,7 @@
 //   name()
 #include <algorithm>
 #include <climits>
+#include <cmath>
 #include <cstdint>
 #include <limits>
 #include <map>
@@ -124,7 +125,9 @@ class BatchedRenderer final : public Renderer {
     const void* positions_host = nullptr;
     Vec3f first{}, last{};
     MeshView view{};
+    uint64_t used = 0;  // uses_ at the last call that used it
   };
+  static constexpr size_t kMaxMeshes = 64;
 
   static void check_loss(const LossOptions& loss) {
     if (!(loss.depth_truncation > 0)) throw std::invalid_argument("loss: depth_truncation must be > 0");
@@ -133,16 +136,21 @@ class BatchedRenderer final : public Renderer {
   const MeshView& upload_mesh(const Mesh& mesh) {
     if (mesh.num_triangles() == 0 || mesh.neighbors().size() != mesh.triangles.size())
       throw std::invalid_argument("renderer: mesh '" + mesh.name + "' is empty or not finalized");
+    ++uses_;
     auto& slot = meshes_[&mesh];
     // Keyed by the Mesh's address; counts, the positions' storage and two vertices confirm it is the same mesh
     // (a new mesh at a reused address is uploaded again).
     const auto same = [](Vec3f a, Vec3f b) { return a.x == b.x && a.y == b.y && a.z == b.z; };
     if (slot && slot->view.num_vertices == mesh.num_vertices() && slot->view.num_triangles == mesh.num_triangles() &&
         slot->positions_host == mesh.positions.data() && same(slot->first, mesh.positions.front()) &&
-        same(slot->last, mesh.positions.back()))
+        same(slot->last, mesh.positions.back())) {
+      slot->used = uses_;
       return slot->view;
+    }
     slot = std::make_unique<ExecMesh>();
     ExecMesh& d = *slot;
+    d.used = uses_;
+    evict_meshes();
     std::vector<TextureView> host_views;
     const MeshView h = mesh.view(host_views);
     exec_.upload(d.positions, h.positions, h.num_vertices);
@@ -181,11 +189,25 @@ class BatchedRenderer final : public Renderer {
     return d.view;
   }
 
+  /// Keeps at most kMaxMeshes uploaded meshes, dropping the least recently used ones that the current call
+  /// does not use (a long-running node that sees many objects must not grow without bound).
+  void evict_meshes() {
+    while (meshes_.size() > kMaxMeshes) {
+      auto oldest = meshes_.end();
+      for (auto it = meshes_.begin(); it != meshes_.end(); ++it)
+        if (it->second->used < call_start_ && (oldest == meshes_.end() || it->second->used < oldest->second->used))
+          oldest = it;
+      if (oldest == meshes_.end()) return;  // all in use by this call
+      meshes_.erase(oldest);
+    }
+  }
+
   /// Forward stages (vertices .. blends) for every hypothesis of every object; fills hyp_ and the buffers.
   /// Evaluating (a loss setup per object): S = 1 without a mask and a non-rotation pose gets no work and an
   /// infinite loss; rendering: only non-finite poses are skipped, as the CPU backend does.
   Call forward(const Camera& camera, const std::vector<ObjectCall>& objects, bool evaluating) {
     camera.validate();
+    call_start_ = uses_ + 1;  // meshes used from here on belong to this call
     Call c{};
     Pipeline& p = c.p;
     p.K = camera.intrinsics();
@@ -266,7 +288,11 @@ class BatchedRenderer final : public Renderer {
     exec_.for_each(c.max_vertices, c.B, VertexStage{p});
     exec_.for_each(c.max_triangles, c.B, TriangleStage{p});
     exec_.for_each(c.max_pixels, c.B, ClearStage{p});
-    exec_.for_each(c.max_triangles, c.B, RasterStage{p});
+    // Bands of rows per triangle, so a few big triangles (a box seen close up) still spread over many threads:
+    // about 4 rows per thread for a triangle of average size (projected area ~ 2 * region / triangles).
+    const double mean_rows = std::sqrt(2.0 * c.max_pixels / std::max(1, c.max_triangles));
+    const int bands = std::max(1, std::min({64, int(std::ceil(mean_rows / 4.0)), INT_MAX / std::max(1, c.max_triangles)}));
+    exec_.for_each(c.max_triangles * bands, c.B, RasterStage{p, bands});
     exec_.for_each(c.max_pixels, c.B, ShadeStage{p});
     exec_.for_each(c.max_pixels, c.B, BlendDetectStage{p});
     exec_.for_each(c.max_pixels, c.B, BlendApplyStage{p});
@@ -319,6 +345,7 @@ class BatchedRenderer final : public Renderer {
 
   Exec exec_;
   std::map<const Mesh*, std::unique_ptr<ExecMesh>> meshes_;
+  uint64_t uses_ = 0, call_start_ = 0;
   std::vector<Hypothesis> hyp_;
   std::vector<ObjectParams> object_params_;
   typename Exec::template Buffer<Hypothesis> d_hyp_;

@@ -130,12 +130,16 @@ struct ClearStage {
   }
 };
 
-/// i: triangle. Walks the triangle's pixels in the region and keeps the nearest per pixel with key_min on
-/// (depth bits, triangle): depths are positive, so their float bits order like the floats, and ties keep the
-/// lower triangle index, as the CPU's scan does.
+/// i: (triangle, band) = (i / bands, i % bands). Walks the band's rows of the triangle's pixels in the region
+/// and keeps the nearest per pixel with key_min on (depth bits, triangle): depths are positive, so their float
+/// bits order like the floats, and ties keep the lower triangle index, as the CPU's scan does. The minimum does
+/// not depend on the order, so splitting big triangles into bands of rows (work for more threads) changes
+/// nothing in the result.
 struct RasterStage {
   Pipeline p;
-  DD_HOST_DEVICE void operator()(int t, int h) const {
+  int bands;
+  DD_HOST_DEVICE void operator()(int i, int h) const {
+    const int t = i / bands, band = i % bands;
     const Hypothesis& hy = p.H[h];
     const ObjectParams& o = p.objects[hy.object];
     if (t >= o.nt || !hy.valid || p.area[hy.triangle_offset + t] == 0.f) return;
@@ -147,7 +151,9 @@ struct RasterStage {
     TriangleRaster R;
     if (!triangle_raster_setup(s, z, &R)) return;
     const int xs = imax(hy.x0, R.x0), xe = imin(hy.x0 + hy.w - 1, R.x1);
-    const int ys = imax(hy.y0, R.y0), ye = imin(hy.y0 + hy.h - 1, R.y1);
+    const int y_first = imax(hy.y0, R.y0), y_last = imin(hy.y0 + hy.h - 1, R.y1);
+    const int rows = (y_last - y_first + bands) / bands;  // ceil(rows / bands)
+    const int ys = y_first + band * rows, ye = imin(y_last, ys + rows - 1);
     for (int y = ys; y <= ye; ++y) {
       long long e[3];
       raster_edges_at(R, xs, y, e);

@@ -5,11 +5,13 @@
 #include <mutex>
 
 #include "diffdope/device.hpp"
+#include "refine_run.hpp"
 
 #include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <limits>
+#include <memory>
 #include <opencv2/imgproc.hpp>
 #include <random>
 #include <stdexcept>
@@ -65,8 +67,18 @@ RefineResult Refiner::refine(const Camera& camera, const Observation& observed, 
 
 RefineResult Refiner::refine(const Camera& camera, const Observation& observed, const Mesh& mesh,
                              const std::vector<Pose>& initials) {
-  const auto t_start = std::chrono::steady_clock::now();
-  const RefinerOptions& o = options_;
+  RefineRun run(options_, camera, observed, mesh, initials);
+  std::vector<LossValue> values;
+  while (!run.done()) {
+    renderer_->evaluate(run.camera(), mesh, run.observation(), run.batch(), run.loss(), run.with_gradient(), values);
+    run.absorb(values, on_iteration);
+  }
+  return run.finish(*renderer_);
+}
+
+RefineRun::RefineRun(const RefinerOptions& o, const Camera& camera, const Observation& observed, const Mesh& mesh,
+                     const std::vector<Pose>& initials)
+    : options_(o), mesh_(mesh), start_time_(std::chrono::steady_clock::now()), initials_(initials) {
   observed.validate(camera);
   if (!observed.has_rgb() && !observed.has_depth())
     throw std::invalid_argument("refine: need at least an rgb or a depth image");
@@ -82,112 +94,125 @@ RefineResult Refiner::refine(const Camera& camera, const Observation& observed, 
   const Pose& initial = initials.front();
   const int starts = int(initials.size());
 
-  const Camera cam = o.image_scale == 1.0 ? camera : camera.scaled(o.image_scale);
-  Observation obs = o.image_scale == 1.0 ? observed : observed.resized(cam);
-  LossOptions loss = o.loss;
+  cam_ = o.image_scale == 1.0 ? camera : camera.scaled(o.image_scale);
+  obs_ = o.image_scale == 1.0 ? observed : observed.resized(cam_);
+  loss_ = o.loss;
   // The paper's edge term: Canny edges of the observed image, computed at the refiner's scale.
-  if (loss.weight_edges > 0 && obs.has_rgb() && !obs.has_edges()) obs.edges = observed_edges(obs.rgb);
-  const bool has_mask = obs.has_mask();
-  if (has_mask) {
-    if (cv::countNonZero(obs.mask > 0) == 0) throw std::invalid_argument("refine: the object mask is empty");
+  if (loss_.weight_edges > 0 && obs_.has_rgb() && !obs_.has_edges()) obs_.edges = observed_edges(obs_.rgb);
+  has_mask_ = obs_.has_mask();
+  if (has_mask_) {
+    if (cv::countNonZero(obs_.mask > 0) == 0) throw std::invalid_argument("refine: the object mask is empty");
   } else {
-    obs.mask = window_mask(cam, mesh, initial, o.no_mask_window);
-    for (int j = 1; j < starts; ++j) obs.mask = cv::max(obs.mask, window_mask(cam, mesh, initials[j], o.no_mask_window));
-    loss.weight_mask = 0;  // the window is not an observation of the silhouette
+    obs_.mask = window_mask(cam_, mesh, initial, o.no_mask_window);
+    for (int j = 1; j < starts; ++j)
+      obs_.mask = cv::max(obs_.mask, window_mask(cam_, mesh, initials[j], o.no_mask_window));
+    loss_.weight_mask = 0;  // the window is not an observation of the silhouette
   }
 
-  const int B = o.batch_size, iters = o.iterations;
+  const int B = o.batch_size;
   std::mt19937_64 rng(o.seed);
-  RefineResult res;
-  res.initial_pose = initial;
-  res.learning_rates.resize(B);
+  res_.initial_pose = initial;
+  res_.learning_rates.resize(B);
   std::uniform_real_distribution<double> U(0.0, 1.0);
   for (int i = 0; i < B; ++i) {
     const double u = U(rng);
-    res.learning_rates[i] = o.lr_log_uniform ? o.lr_low * std::pow(o.lr_high / o.lr_low, u)
-                                             : o.lr_low + (o.lr_high - o.lr_low) * u;
+    res_.learning_rates[i] = o.lr_log_uniform ? o.lr_low * std::pow(o.lr_high / o.lr_low, u)
+                                              : o.lr_low + (o.lr_high - o.lr_low) * u;
   }
-  if (B == 1) res.learning_rates[0] = 0.5 * (o.lr_low + o.lr_high);
+  if (B == 1) res_.learning_rates[0] = 0.5 * (o.lr_low + o.lr_high);
 
   // Several initial poses (e.g. a new detection and the previous frame's result): run i starts from
   // initials[i % starts], so every start gets a spread of learning rates and the loss picks the winner.
-  std::vector<Pose> poses(B, initial);
-  for (int i = 0; i < B; ++i) poses[i] = initials[i % starts];
-  std::vector<Pose> best_pose = poses;
-  std::vector<LossValue> values, best(B);
-  for (auto& b : best) b.total = std::numeric_limits<double>::infinity();
-  res.run_histories.assign(B, {});
-  const double diameter = std::max(mesh.diameter(), 1e-6);
-  std::vector<int> active(B);  // runs still descending (successive halving drops the worst)
-  for (int i = 0; i < B; ++i) active[i] = i;
-  std::vector<Pose> batch;
-  int stale = 0;
-  double best_overall = std::numeric_limits<double>::infinity();
-  int k = 0;
-  for (; k <= iters; ++k) {
-    const bool last = k == iters;
-    if (o.successive_halving && k > 0 && !last && active.size() > 1 && (k == iters / 4 || k == iters / 2)) {
-      std::stable_sort(active.begin(), active.end(), [&](int a, int b) { return best[a].total < best[b].total; });
-      active.resize((active.size() + 1) / 2);
-      std::sort(active.begin(), active.end());
-    }
-    batch.resize(active.size());
-    for (size_t j = 0; j < active.size(); ++j) batch[j] = poses[active[j]];
-    renderer_->evaluate(cam, mesh, obs, batch, loss, !last, values);
-    if (k == 0) {
-      res.initial_loss = values[0].total;
-      for (int j = 1; j < std::min(starts, int(values.size())); ++j)
-        res.initial_loss = std::min(res.initial_loss, values[j].total);
-    }
-    for (size_t j = 0; j < active.size(); ++j) {
-      const int i = active[j];
-      res.run_histories[i].push_back(values[j].total);
-      if (values[j].total < best[i].total) {
-        best[i] = values[j];
-        best_pose[i] = poses[i];
-      }
-    }
-    const double round_best = std::min_element(best.begin(), best.end(), [](auto& a, auto& b) {
-                                return a.total < b.total;
-                              })->total;
-    const bool improved = round_best < best_overall * (1.0 - o.early_stop_tolerance);
-    best_overall = std::min(best_overall, round_best);
-    if (on_iteration) on_iteration(k, iters, best_overall);
-    stale = improved ? 0 : stale + 1;
-    if (last || (o.early_stop_patience > 0 && stale >= o.early_stop_patience)) break;
-    const double decay = std::pow(o.lr_decay, double(k) / iters);
-    for (size_t j = 0; j < active.size(); ++j) {
-      const int i = active[j];
-      if (!std::isfinite(values[j].total)) continue;  // a run that left the image keeps its pose
-      const Eigen::Vector3d pivot = poses[i] * mesh.center();
-      poses[i] = refiner_step(poses[i], values[j].gradient, res.learning_rates[i] * decay, diameter, pivot);
+  poses_.assign(B, initial);
+  for (int i = 0; i < B; ++i) poses_[i] = initials[i % starts];
+  best_pose_ = poses_;
+  best_.assign(B, LossValue());
+  for (auto& b : best_) b.total = std::numeric_limits<double>::infinity();
+  res_.run_histories.assign(B, {});
+  diameter_ = std::max(mesh.diameter(), 1e-6);
+  active_.resize(B);
+  for (int i = 0; i < B; ++i) active_[i] = i;
+  best_overall_ = std::numeric_limits<double>::infinity();
+}
+
+const std::vector<Pose>& RefineRun::batch() {
+  const int iters = options_.iterations;
+  const bool last = k_ == iters;
+  if (options_.successive_halving && k_ > 0 && !last && active_.size() > 1 && (k_ == iters / 4 || k_ == iters / 2)) {
+    std::stable_sort(active_.begin(), active_.end(), [&](int a, int b) { return best_[a].total < best_[b].total; });
+    active_.resize((active_.size() + 1) / 2);
+    std::sort(active_.begin(), active_.end());
+  }
+  batch_.resize(active_.size());
+  for (size_t j = 0; j < active_.size(); ++j) batch_[j] = poses_[active_[j]];
+  return batch_;
+}
+
+void RefineRun::absorb(const std::vector<LossValue>& values, const std::function<void(int, int, double)>& on_iteration) {
+  const RefinerOptions& o = options_;
+  const int iters = o.iterations, starts = int(initials_.size());
+  const bool last = k_ == iters;
+  if (k_ == 0) {
+    res_.initial_loss = values[0].total;
+    for (int j = 1; j < std::min(starts, int(values.size())); ++j)
+      res_.initial_loss = std::min(res_.initial_loss, values[j].total);
+  }
+  for (size_t j = 0; j < active_.size(); ++j) {
+    const int i = active_[j];
+    res_.run_histories[i].push_back(values[j].total);
+    if (values[j].total < best_[i].total) {
+      best_[i] = values[j];
+      best_pose_[i] = poses_[i];
     }
   }
-  res.iterations = std::min(k, iters);
+  const double round_best =
+      std::min_element(best_.begin(), best_.end(), [](auto& a, auto& b) { return a.total < b.total; })->total;
+  const bool improved = round_best < best_overall_ * (1.0 - o.early_stop_tolerance);
+  best_overall_ = std::min(best_overall_, round_best);
+  if (on_iteration) on_iteration(k_, iters, best_overall_);
+  stale_ = improved ? 0 : stale_ + 1;
+  if (last || (o.early_stop_patience > 0 && stale_ >= o.early_stop_patience)) {
+    res_.iterations = std::min(k_, iters);
+    done_ = true;
+    return;
+  }
+  const double decay = std::pow(o.lr_decay, double(k_) / iters);
+  for (size_t j = 0; j < active_.size(); ++j) {
+    const int i = active_[j];
+    if (!std::isfinite(values[j].total)) continue;  // a run that left the image keeps its pose
+    const Eigen::Vector3d pivot = poses_[i] * mesh_.center();
+    poses_[i] = refiner_step(poses_[i], values[j].gradient, res_.learning_rates[i] * decay, diameter_, pivot);
+  }
+  ++k_;
+}
 
+RefineResult RefineRun::finish(Renderer& renderer) {
+  const RefinerOptions& o = options_;
+  const int B = o.batch_size, starts = int(initials_.size());
+  RefineResult res = std::move(res_);
   res.run_losses.resize(B);
-  for (int i = 0; i < B; ++i) res.run_losses[i] = best[i].total;
+  for (int i = 0; i < B; ++i) res.run_losses[i] = best_[i].total;
   res.winner = int(std::min_element(res.run_losses.begin(), res.run_losses.end()) - res.run_losses.begin());
-  res.pose = best_pose[res.winner];
+  res.pose = best_pose_[res.winner];
   res.start = res.winner % starts;
-  res.initial_pose = initials[res.start];
-  res.loss = best[res.winner];
+  res.initial_pose = initials_[res.start];
+  res.loss = best_[res.winner];
   res.history = res.run_histories[res.winner];
 
   // Quality scores at the refined pose.
-  const RenderImage img = renderer_->render(cam, mesh, {res.pose}, obs.mask)[0];
+  const RenderImage img = renderer.render(cam_, mesh_, {res.pose}, obs_.mask)[0];
   const cv::Mat rendered = img.coverage >= 0.5f;
-  if (has_mask) {
-    const cv::Mat observed_mask = obs.mask >= 0.5f;
+  if (has_mask_) {
+    const cv::Mat observed_mask = obs_.mask >= 0.5f;
     const double inter = cv::countNonZero(rendered & observed_mask), uni = cv::countNonZero(rendered | observed_mask);
     res.mask_iou = uni > 0 ? inter / uni : 0.0;
   }
-  if (obs.has_depth()) {
+  if (obs_.has_depth()) {
     // Over the observed object, or (without a mask) over what the render covers: the window is not the object.
-    const cv::Mat object = (has_mask ? cv::Mat(obs.mask >= 0.5f) : rendered) & (obs.depth > 0);
+    const cv::Mat object = (has_mask_ ? cv::Mat(obs_.mask >= 0.5f) : rendered) & (obs_.depth > 0);
     const int n = cv::countNonZero(object);
     cv::Mat diff;
-    cv::absdiff(obs.depth, img.depth, diff);
+    cv::absdiff(obs_.depth, img.depth, diff);
     const cv::Mat inlier = object & (img.depth > 0) & (diff < o.inlier_threshold);
     res.depth_inliers = n > 0 ? double(cv::countNonZero(inlier)) / n : 0.0;
   }
@@ -198,29 +223,85 @@ RefineResult Refiner::refine(const Camera& camera, const Observation& observed, 
   }
   res.plausible = std::isfinite(res.loss.total) && (res.mask_iou < 0 || res.mask_iou >= o.min_mask_iou) &&
                   (res.depth_inliers < 0 || res.depth_inliers >= o.min_depth_inliers);
-  res.time_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t_start).count();
+  res.time_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start_time_).count();
   return res;
 }
 
 std::vector<RefineResult> Refiner::refine_all(const Camera& camera, const Observation& frame,
                                               const std::vector<ObjectTarget>& objects) {
-  std::vector<RefineResult> out;
-  for (const ObjectTarget& t : objects) {
-    Observation o;
-    o.rgb = frame.rgb;
-    o.depth = frame.depth;
-    o.edges = frame.edges;
+  std::vector<RefineResult> out(objects.size());
+  std::vector<std::unique_ptr<RefineRun>> runs(objects.size());
+  const auto fail = [&](size_t k, const std::string& why) {
+    out[k] = RefineResult();
+    out[k].pose = out[k].initial_pose = objects[k].initial;
+    out[k].error = why;
+    runs[k].reset();
+  };
+  for (size_t k = 0; k < objects.size(); ++k) {
+    const ObjectTarget& t = objects[k];
     try {
       if (!t.mesh) throw std::invalid_argument("no mesh");
+      Observation o;
+      o.rgb = frame.rgb;
+      o.depth = frame.depth;
+      o.edges = frame.edges;
       if (!t.mask.empty()) o.mask = t.mask.type() == CV_32FC1 ? t.mask : to_mask_float(t.mask);
       std::vector<Pose> initials{t.initial};
       initials.insert(initials.end(), t.alternatives.begin(), t.alternatives.end());
-      out.push_back(refine(camera, o, *t.mesh, initials));
+      runs[k] = std::make_unique<RefineRun>(options_, camera, o, *t.mesh, initials);
     } catch (const std::exception& e) {
-      RefineResult r;
-      r.pose = r.initial_pose = t.initial;
-      r.error = e.what();
-      out.push_back(r);
+      fail(k, e.what());
+    }
+  }
+  // Lockstep: each iteration evaluates the active runs of every object in one renderer call (the CUDA backend
+  // launches them together). The objects share the scaled rgb / depth / edges; each brings its own mask.
+  std::vector<ObjectBatch> batches;
+  std::vector<size_t> which;
+  std::vector<std::vector<LossValue>> values;
+  for (;;) {
+    batches.clear();
+    which.clear();
+    const Observation* shared = nullptr;
+    bool with_gradient = false;
+    for (size_t k = 0; k < runs.size(); ++k) {
+      if (!runs[k] || runs[k]->done()) continue;
+      RefineRun& r = *runs[k];
+      ObjectBatch b;
+      b.mesh = &r.mesh();
+      b.mask = r.observation().mask;
+      b.loss = r.loss();
+      b.poses = r.batch();
+      batches.push_back(std::move(b));
+      which.push_back(k);
+      if (!shared) shared = &r.observation();
+      with_gradient = with_gradient || r.with_gradient();
+    }
+    if (batches.empty()) break;
+    const Camera& cam = runs[which[0]]->camera();  // the same scaled camera for every object
+    try {
+      renderer_->evaluate_objects(cam, *shared, batches, with_gradient, values);
+    } catch (const std::exception&) {
+      // One object's input broke the joint call: evaluate them one by one so only that object fails.
+      values.assign(which.size(), {});
+      for (size_t j = 0; j < which.size(); ++j) {
+        std::vector<std::vector<LossValue>> one;
+        try {
+          renderer_->evaluate_objects(cam, *shared, {batches[j]}, with_gradient, one);
+          values[j] = std::move(one[0]);
+        } catch (const std::exception& e) {
+          fail(which[j], e.what());
+        }
+      }
+    }
+    for (size_t j = 0; j < which.size(); ++j)
+      if (runs[which[j]]) runs[which[j]]->absorb(values[j], nullptr);
+  }
+  for (size_t k = 0; k < runs.size(); ++k) {
+    if (!runs[k]) continue;
+    try {
+      out[k] = runs[k]->finish(*renderer_);
+    } catch (const std::exception& e) {
+      fail(k, e.what());
     }
   }
   return out;

@@ -243,6 +243,36 @@ TEST_P(BatchedBackend, BadInputIsRefusedClearly) {
   EXPECT_THROW(gpu->render(cam, c.mesh, {c.truth}, obs.mask), std::invalid_argument);
 }
 
+// More meshes than the upload cache keeps (64): the least recently used are dropped and uploaded again when
+// they come back, with the same results; a call with many objects keeps all of its own.
+TEST_P(BatchedBackend, ManyMeshesComeAndGo) {
+  const Camera cam(200, 200, 39.5, 29.5, 80, 60);
+  auto gpu = make();
+  auto cpu = make_cpu_renderer();
+  std::vector<Mesh> meshes;
+  for (int k = 0; k < 70; ++k) meshes.push_back(make_box(Eigen::Vector3d(0.05 + 0.001 * k, 0.04, 0.06), make_pattern_texture(16, k)));
+  const Pose pose = look_pose(0.3, 0.2, 0.1, 0.0, 0.0, 0.5);
+  const Observation obs = observe(*cpu, cam, meshes[0], pose);
+  std::vector<ObjectBatch> all(meshes.size());
+  for (size_t k = 0; k < meshes.size(); ++k) all[k].mesh = &meshes[k], all[k].mask = obs.mask, all[k].poses = {pose};
+  std::vector<LossValue> one;
+  std::vector<double> alone(meshes.size());
+  for (size_t k = 0; k < meshes.size(); ++k) {  // one call each: the first ones are dropped after 64
+    gpu->evaluate(cam, meshes[k], obs, {pose}, LossOptions(), true, one);
+    alone[k] = one[0].total;
+  }
+  std::vector<std::vector<LossValue>> together;
+  gpu->evaluate_objects(cam, obs, all, true, together);  // re-uploads the dropped ones, keeps all 70
+  for (size_t k = 0; k < meshes.size(); k += 3) {
+    std::vector<LossValue> ref;
+    cpu->evaluate(cam, meshes[k], obs, {pose}, LossOptions(), true, ref);
+    gpu->evaluate(cam, meshes[k], obs, {pose}, LossOptions(), true, one);
+    EXPECT_NEAR(alone[k], ref[0].total, 1e-5) << k;
+    EXPECT_EQ(together[k][0].total, alone[k]) << k;
+    EXPECT_EQ(one[0].total, alone[k]) << k;
+  }
+}
+
 INSTANTIATE_TEST_SUITE_P(Executors, BatchedBackend, ::testing::Values("cuda-emulated", "cuda"),
                          [](const ::testing::TestParamInfo<std::string>& i) {
                            return i.param == "cuda" ? std::string("Cuda") : std::string("CudaEmulated");

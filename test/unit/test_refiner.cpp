@@ -2,6 +2,7 @@
 // background and a brightness mismatch), its options, and its input checks.
 #include <gtest/gtest.h>
 
+#include "diffdope/device.hpp"
 #include "diffdope/metrics.hpp"
 #include "diffdope/procedural.hpp"
 #include "diffdope/refiner.hpp"
@@ -204,6 +205,28 @@ TEST(Refiner, RefinesEveryObjectOfAFrameAndReportsBadOnes) {
   EXPECT_LT(1e3 * adds_error(metric_points(can), res[1].pose, can_truth), 3.0);
   EXPECT_FALSE(res[2].error.empty());
   EXPECT_FALSE(res[2].plausible);
+
+  // Lockstep (all objects' runs in one renderer call per iteration) gives what each object alone gives: on
+  // the CPU backend (one evaluate per object) and on the batched pipeline (one call for all objects).
+  for (const bool batched : {false, true}) {
+    SCOPED_TRACE(batched ? "cuda-emulated" : "cpu");
+    const auto make = [&] { return batched ? make_emulated_cuda_renderer() : make_cpu_renderer(); };
+    Refiner together(test_options(), make());
+    const auto all = together.refine_all(cam, frame, objects);
+    ASSERT_EQ(all.size(), 3u);
+    EXPECT_FALSE(all[2].error.empty());
+    for (size_t k = 0; k < 2; ++k) {
+      Observation o = frame;
+      o.mask = to_mask_float(objects[k].mask);
+      const RefineResult alone = Refiner(test_options(), make()).refine(cam, o, *objects[k].mesh, objects[k].initial);
+      EXPECT_TRUE(all[k].error.empty()) << all[k].error;
+      EXPECT_EQ(all[k].pose.matrix(), alone.pose.matrix()) << "object " << k;
+      EXPECT_EQ(all[k].loss.total, alone.loss.total) << "object " << k;
+      EXPECT_EQ(all[k].winner, alone.winner);
+      EXPECT_EQ(all[k].mask_iou, alone.mask_iou);
+      EXPECT_LT((all[k].pose.t - res[k].pose.t).norm(), 1e-4);  // batched pipeline vs CPU backend
+    }
+  }
 }
 
 TEST(RefinerOptions, YamlOverridesAndRejectsTypos) {

@@ -1,0 +1,54 @@
+#pragma once
+// One object's refinement (Algorithm 1) as a state machine, so Refiner::refine() can drive one object and
+// Refiner::refine_all() several in lockstep, every iteration's hypotheses of all objects in one renderer call
+// (internal header).
+#include <chrono>
+#include <functional>
+#include <vector>
+
+#include "diffdope/refiner.hpp"
+
+namespace diffdope {
+
+class RefineRun {
+ public:
+  /// Validates the input and prepares the scaled images, the loss and the learning rates. Throws
+  /// std::invalid_argument on unusable input (as Refiner::refine()).
+  RefineRun(const RefinerOptions& options, const Camera& camera, const Observation& observed, const Mesh& mesh,
+            const std::vector<Pose>& initials);
+
+  bool done() const { return done_; }
+  /// The poses to evaluate this iteration (the active runs).
+  const std::vector<Pose>& batch();
+  /// Gradients are needed except on the last iteration.
+  bool with_gradient() const { return k_ < options_.iterations; }
+  /// Takes this iteration's values for batch(), keeps each run's best and steps the runs.
+  void absorb(const std::vector<LossValue>& values, const std::function<void(int, int, double)>& on_iteration);
+  /// Winner and quality scores (renders the refined pose once).
+  RefineResult finish(Renderer& renderer);
+
+  const Camera& camera() const { return cam_; }
+  const Observation& observation() const { return obs_; }
+  const LossOptions& loss() const { return loss_; }
+  const Mesh& mesh() const { return mesh_; }
+
+ private:
+  const RefinerOptions& options_;
+  const Mesh& mesh_;
+  std::chrono::steady_clock::time_point start_time_;
+  std::vector<Pose> initials_;
+  Camera cam_;
+  Observation obs_;
+  LossOptions loss_;
+  bool has_mask_ = false;
+  double diameter_ = 1.0;
+  RefineResult res_;
+  std::vector<Pose> poses_, best_pose_, batch_;
+  std::vector<LossValue> best_;
+  std::vector<int> active_;  // runs still descending (successive halving drops the worst)
+  int k_ = 0, stale_ = 0;
+  double best_overall_;
+  bool done_ = false;
+};
+
+}  // namespace diffdope
