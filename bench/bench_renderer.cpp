@@ -21,12 +21,14 @@ struct Scene {
   std::vector<Pose> poses;
 };
 
-Scene make_scene(int width, int batch) {
+/// mesh: 0 the 14.4k-triangle sphere, 1 a 12-triangle box (few big triangles: the raster's worst case).
+Scene make_scene(int width, int batch, int mesh = 0) {
   Scene s;
   const double f = 300.0 * width / 320.0;
   const int height = width == 960 ? 540 : width * 3 / 4;
   s.cam = Camera(f, f, width / 2.0 - 0.5, height / 2.0 - 0.5, width, height);
-  s.mesh = make_uv_sphere(0.05, 60, 120, make_label_texture(512, 7));  // 14,400 triangles
+  s.mesh = mesh == 0 ? make_uv_sphere(0.05, 60, 120, make_label_texture(512, 7))  // 14,400 triangles
+                     : make_box(Eigen::Vector3d(0.08, 0.08, 0.08), make_label_texture(512, 7));
   // Distance chosen so the sphere covers ~10,000 pixels: pi * (f r / z)^2 = 1e4.
   const double z = f * 0.05 / std::sqrt(1e4 / M_PI);
   Vector6d d0;
@@ -48,13 +50,13 @@ Scene make_scene(int width, int batch) {
   return s;
 }
 
-void run(benchmark::State& state, bool gradient, bool cull, bool cuda = false) {
+void run(benchmark::State& state, bool gradient, bool cull, bool cuda = false, int mesh = 0) {
   if (cuda && !cuda_device_info().available) {
     state.SkipWithError(("no CUDA device: " + cuda_device_info().reason).c_str());
     return;
   }
   const int width = static_cast<int>(state.range(0));
-  const Scene s = make_scene(width, 32);
+  const Scene s = make_scene(width, 32, mesh);
   RenderOptions ro;
   ro.cull_back_faces = cull;
   auto r = cuda ? make_cuda_renderer(ro) : make_cpu_renderer(ro);
@@ -76,6 +78,24 @@ void BM_ForwardGradient(benchmark::State& st) { run(st, true, false); }
 void BM_ForwardGradientCulled(benchmark::State& st) { run(st, true, true); }
 void BM_CudaForward(benchmark::State& st) { run(st, false, false, true); }
 void BM_CudaForwardGradient(benchmark::State& st) { run(st, true, false, true); }
+void BM_CudaForwardGradientBox(benchmark::State& st) { run(st, true, false, true, 1); }
+
+/// Three objects of a frame, B = 32 each, in one evaluate_objects() call (the refiner's lockstep refine_all).
+void BM_CudaThreeObjects(benchmark::State& state) {
+  if (!cuda_device_info().available) {
+    state.SkipWithError(("no CUDA device: " + cuda_device_info().reason).c_str());
+    return;
+  }
+  const Scene s = make_scene(static_cast<int>(state.range(0)), 32);
+  auto r = make_cuda_renderer();
+  std::vector<ObjectBatch> objects(3);
+  for (ObjectBatch& b : objects) b.mesh = &s.mesh, b.mask = s.obs.mask, b.poses = s.poses;
+  std::vector<std::vector<LossValue>> out;
+  for (auto _ : state) {
+    r->evaluate_objects(s.cam, s.obs, objects, true, out);
+    benchmark::DoNotOptimize(out.data());
+  }
+}
 
 }  // namespace
 
@@ -84,4 +104,6 @@ BENCHMARK(BM_ForwardGradient)->Arg(320)->Arg(640)->Unit(benchmark::kMillisecond)
 BENCHMARK(BM_ForwardGradientCulled)->Arg(320)->Arg(640)->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK(BM_CudaForward)->Arg(320)->Arg(640)->Arg(960)->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK(BM_CudaForwardGradient)->Arg(320)->Arg(640)->Arg(960)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_CudaForwardGradientBox)->Arg(960)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_CudaThreeObjects)->Arg(960)->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK_MAIN();
