@@ -212,9 +212,16 @@ TEST(Refiner, RefinesEveryObjectOfAFrameAndReportsBadOnes) {
     SCOPED_TRACE(batched ? "cuda-emulated" : "cpu");
     const auto make = [&] { return batched ? make_emulated_cuda_renderer() : make_cpu_renderer(); };
     Refiner together(test_options(), make());
-    const auto all = together.refine_all(cam, frame, objects);
-    ASSERT_EQ(all.size(), 3u);
+    // An object whose mesh the renderer refuses (not finalized) fails alone; the others are still refined.
+    Mesh raw;
+    raw.positions = box.positions;
+    raw.triangles = box.triangles;
+    std::vector<ObjectTarget> with_raw = objects;
+    with_raw.push_back({&raw, box_truth, scene.visible_masks[0]});
+    const auto all = together.refine_all(cam, frame, with_raw);
+    ASSERT_EQ(all.size(), 4u);
     EXPECT_FALSE(all[2].error.empty());
+    EXPECT_NE(all[3].error.find("not finalized"), std::string::npos) << all[3].error;
     for (size_t k = 0; k < 2; ++k) {
       Observation o = frame;
       o.mask = to_mask_float(objects[k].mask);
