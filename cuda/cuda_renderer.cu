@@ -82,10 +82,11 @@ struct DeviceImage {
   ~DeviceImage() {
     if (pinned) cudaFreeHost(pinned);
   }
-  const float* get(const cv::Mat& m, cudaStream_t s) {
+  const float* get(const cv::Mat& m, cudaStream_t s, bool* changed) {
     const cv::Mat c = m.isContinuous() ? m : m.clone();
     const size_t n = c.total() * c.channels();
     if (n == size && std::memcmp(pinned, c.ptr<float>(), sizeof(float) * n) == 0) return data.ptr;
+    *changed = true;
     if (n > pinned_size) {
       if (pinned) cudaFreeHost(pinned);
       pinned = nullptr;
@@ -140,9 +141,9 @@ class CudaExec {
     check(cudaGetLastError(), "kernel launch");
   }
   void synchronize(const char* what) { check(cudaStreamSynchronize(stream_), what); }
-  const float* image(int slot, const cv::Mat& m) {
+  const float* image(int slot, const cv::Mat& m, bool* changed) {
     while (int(images_.size()) <= slot) images_.push_back(std::make_unique<DeviceImage>());
-    return images_[slot]->get(m, stream_);
+    return images_[slot]->get(m, stream_, changed);
   }
   double* results(size_t n) {
     if (n > results_size_) {

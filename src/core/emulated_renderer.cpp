@@ -62,10 +62,18 @@ class EmulatedExec {
     });
   }
   void synchronize(const char*) {}
-  const float* image(int slot, const cv::Mat& m) {
+  /// A copy of the image per slot, replaced only when the content differs (as the CUDA executor's staging).
+  const float* image(int slot, const cv::Mat& m, bool* changed) {
     if (int(images_.size()) <= slot) images_.resize(slot + 1);
-    images_[slot] = m.isContinuous() ? m : m.clone();  // keeps the data alive until the next call
-    return images_[slot].ptr<float>();
+    cv::Mat& kept = images_[slot];
+    const size_t bytes = m.total() * m.elemSize();
+    const bool same = kept.size == m.size && kept.type() == m.type() && m.isContinuous() &&
+                      std::memcmp(kept.data, m.data, bytes) == 0;
+    if (!same) {
+      kept = m.clone();
+      *changed = true;
+    }
+    return kept.ptr<float>();
   }
   double* results(size_t n) {
     if (results_.size() < n) results_.resize(n);

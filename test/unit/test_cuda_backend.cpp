@@ -243,6 +243,37 @@ TEST_P(BatchedBackend, BadInputIsRefusedClearly) {
   EXPECT_THROW(gpu->render(cam, c.mesh, {c.truth}, obs.mask), std::invalid_argument);
 }
 
+// Images and loss constants are kept between calls while the inputs stay the same: a change written into the
+// same buffers (mask, depth, rgb), other loss options or a dropped mask must all be seen.
+TEST_P(BatchedBackend, SeesEveryChangeOfItsInputs) {
+  const Camera cam = test_camera();
+  auto cpu = make_cpu_renderer();
+  auto gpu = make();
+  const Case c = cases()[1];
+  Observation obs = observe(*cpu, cam, c.mesh, c.truth);
+  const auto check = [&](const Observation& o, const LossOptions& loss, const char* what) {
+    std::vector<LossValue> a, b;
+    cpu->evaluate(cam, c.mesh, o, {c.test}, loss, true, a);
+    gpu->evaluate(cam, c.mesh, o, {c.test}, loss, true, b);
+    EXPECT_NEAR(a[0].total, b[0].total, 1e-5 * std::max(1.0, a[0].total)) << what;
+    EXPECT_LT((a[0].gradient - b[0].gradient).norm() / std::max(a[0].gradient.norm(), 1e-9), 1e-3) << what;
+  };
+  LossOptions loss;
+  check(obs, loss, "first");
+  obs.mask(cv::Rect(0, 0, cam.width / 2, cam.height)).setTo(0.0);  // in place: same buffer, other content
+  check(obs, loss, "mask changed in place");
+  obs.depth(cv::Rect(0, 0, cam.width, cam.height / 2)).setTo(0.0);
+  check(obs, loss, "depth changed in place");
+  obs.rgb *= 0.5;
+  check(obs, loss, "rgb changed in place");
+  loss.weight_depth = 4.0;
+  check(obs, loss, "other weights");
+  Observation no_mask = obs;
+  no_mask.mask = cv::Mat();
+  check(no_mask, loss, "mask dropped");
+  check(obs, loss, "mask back");
+}
+
 // More meshes than the upload cache keeps (64): the least recently used are dropped and uploaded again when
 // they come back, with the same results; a call with many objects keeps all of its own.
 TEST_P(BatchedBackend, ManyMeshesComeAndGo) {
