@@ -20,6 +20,7 @@
 #include <cmath>
 #include <cstdint>
 #include <cstring>
+#include <deque>
 #include <limits>
 #include <map>
 #include <memory>
@@ -415,7 +416,8 @@ class BatchedRenderer final : public Renderer {
   uint64_t uses_ = 0, call_start_ = 0;
   std::vector<Hypothesis> hyp_;
   std::vector<ObjectParams> object_params_;
-  std::vector<SetupCache> setups_;  // per object slot of evaluate_objects (evaluate(): slot 0)
+  std::deque<SetupCache> setups_;  // per object slot of evaluate_objects (evaluate(): slot 0); a deque, so
+                                   // growing it keeps the references of the call in progress valid
   std::vector<uint64_t> mask_generation_;
   uint64_t depth_generation_ = 0;
   typename Exec::template Buffer<Hypothesis> d_hyp_;
