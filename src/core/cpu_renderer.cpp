@@ -124,6 +124,9 @@ Rect CpuRenderer::rasterize(const CallContext& ctx, const Pose& pose, Workspace&
     if (ws.tri_area[t] == 0.f) continue;
     const int* v = M.triangles + 3 * t;
     const Vec2f s[3] = {ws.pix[v[0]], ws.pix[v[1]], ws.pix[v[2]]};
+    int bx0, bx1, by0, by1;  // covers no pixel centre of the region: nothing to set up
+    raster_bounds(s, &bx0, &bx1, &by0, &by1);
+    if (std::max(roi.x0, bx0) > std::min(roi.x1 - 1, bx1) || std::max(roi.y0, by0) > std::min(roi.y1 - 1, by1)) continue;
     const float z[3] = {ws.cam[v[0]].z, ws.cam[v[1]].z, ws.cam[v[2]].z};
     TriangleRaster R;
     if (!triangle_raster_setup(s, z, &R)) continue;

@@ -52,6 +52,15 @@ struct TriangleRaster {
   int x0, x1, y0, y1;   // pixel bounding box (inclusive, not clipped to the image)
 };
 
+/// Pixel bounding box (inclusive) of the pixel centres the triangle can cover; empty (x0 > x1 or y0 > y1) for a
+/// triangle between pixel centres, which a dense mesh far away mostly has: those skip the fixed-point set-up.
+DD_HOST_DEVICE void raster_bounds(const Vec2f s[3], int* x0, int* x1, int* y0, int* y1) {
+  *x0 = static_cast<int>(ceilf(fminf(fminf(s[0].x, s[1].x), s[2].x)));
+  *x1 = static_cast<int>(floorf(fmaxf(fmaxf(s[0].x, s[1].x), s[2].x)));
+  *y0 = static_cast<int>(ceilf(fminf(fminf(s[0].y, s[1].y), s[2].y)));
+  *y1 = static_cast<int>(floorf(fmaxf(fmaxf(s[0].y, s[1].y), s[2].y)));
+}
+
 /// s: pixel positions, z: camera depths of the three vertices. False when the triangle has no fixed-point area.
 DD_HOST_DEVICE bool triangle_raster_setup(const Vec2f s[3], const float z[3], TriangleRaster* r) {
   constexpr long long kOne = 1LL << kSubpixelBits;
@@ -67,10 +76,7 @@ DD_HOST_DEVICE bool triangle_raster_setup(const Vec2f s[3], const float z[3], Tr
     r->top_left[k] = edge_is_top_left_fixed(r->f[k], r->f[(k + 1) % 3], r->orient);
     r->dx[k] = -r->orient * (r->f[(k + 1) % 3].y - r->f[k].y) * kOne;
   }
-  r->x0 = static_cast<int>(ceilf(fminf(fminf(s[0].x, s[1].x), s[2].x)));
-  r->x1 = static_cast<int>(floorf(fmaxf(fmaxf(s[0].x, s[1].x), s[2].x)));
-  r->y0 = static_cast<int>(ceilf(fminf(fminf(s[0].y, s[1].y), s[2].y)));
-  r->y1 = static_cast<int>(floorf(fmaxf(fmaxf(s[0].y, s[1].y), s[2].y)));
+  raster_bounds(s, &r->x0, &r->x1, &r->y0, &r->y1);
   return true;
 }
 
