@@ -41,6 +41,9 @@ geometry_msgs::Pose pose_to_msg(const diffdope::Pose& pose);
 diffdope::Pose pose_from_transform(const geometry_msgs::Transform& msg, const std::string& what);
 geometry_msgs::Transform transform_to_msg(const diffdope::Pose& pose);
 
+/// A TF frame name without its leading '/' (tf2 refuses it; old tf and some drivers still write it).
+std::string strip_slash(const std::string& frame_id);
+
 /// v with `precision` decimals, for log messages and diagnostics.
 std::string format_fixed(double v, int precision = 3);
 

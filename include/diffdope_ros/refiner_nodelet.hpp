@@ -115,6 +115,10 @@ class RefinerNodelet : public nodelet::Nodelet {
   /// Throws std::runtime_error (TF failure, NaN, behind the camera).
   diffdope::Pose meshPoseInCamera(const geometry_msgs::PoseStamped& pose, const Slot& slot, const Frame& frame);
   void absorbDetections(const Frame& frame);
+  /// A frame much older than the last one processed (a looped bag, a restarted clock): tracks and unused
+  /// detections belong to the other timeline and are dropped, with one warning. Worker thread only.
+  void resetOnTimeJump(const Frame& frame);
+  double last_frame_stamp_ = 0.0;  // worker thread only
   /// Per object (slot index), its initial poses; the refiner shares the runs among them and the loss decides.
   using SeedList = std::vector<std::pair<size_t, std::vector<diffdope::Seed>>>;
   /// Refines and publishes; objects that could not be refined are named (with the reason) in `skipped`.

@@ -150,6 +150,10 @@ geometry_msgs::Transform transform_to_msg(const diffdope::Pose& pose) {
   return t;
 }
 
+std::string strip_slash(const std::string& frame_id) {
+  return !frame_id.empty() && frame_id[0] == '/' ? frame_id.substr(1) : frame_id;
+}
+
 std::string format_fixed(double v, int precision) {
   std::ostringstream s;
   s.setf(std::ios::fixed);

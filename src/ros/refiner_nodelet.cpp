@@ -251,6 +251,17 @@ void RefinerNodelet::onImages(const sensor_msgs::ImageConstPtr& rgb, const senso
     std::string warning;
     frame->camera = camera_from_info(*info, &warning);
     if (!warning.empty()) errors_.warn("camera_info_k", warning);
+    // The rgb image's frame is the camera frame used; inputs in other frames are most likely not registered to
+    // it (another camera of the rig, unaligned depth). Said, not refused: some drivers name frames loosely.
+    const auto differs = [&](const std::string& other, const char* what) {
+      if (!other.empty() && strip_slash(other) != strip_slash(rgb->header.frame_id))
+        errors_.warn(std::string("frame/") + what, std::string(what) + " is in frame '" + other +
+                                                       "' but the rgb image in '" + rgb->header.frame_id +
+                                                       "': using the rgb frame (is it registered to the rgb camera?)");
+    };
+    differs(info->header.frame_id, "camera_info");
+    if (depth) differs(depth->header.frame_id, "depth");
+    if (mask) differs(mask->header.frame_id, "mask");
     if (int(rgb->width) != frame->camera.width || int(rgb->height) != frame->camera.height)
       throw std::invalid_argument("rgb image is " + std::to_string(rgb->width) + "x" + std::to_string(rgb->height) +
                                   " but camera_info says " + std::to_string(info->width) + "x" +

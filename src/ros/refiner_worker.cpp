@@ -73,8 +73,7 @@ diffdope::Pose RefinerNodelet::meshPoseInCamera(const geometry_msgs::PoseStamped
   const std::string what = "initial pose of '" + slot.config.name + "'";
   diffdope::Pose in_source = pose_from_msg(pose.pose, what);
   diffdope::Pose camera_from_source;  // identity when the pose is already in the camera frame
-  auto strip = [](const std::string& f) { return !f.empty() && f[0] == '/' ? f.substr(1) : f; };
-  const std::string camera = strip(frame.header.frame_id), source = strip(pose.header.frame_id);
+  const std::string camera = strip_slash(frame.header.frame_id), source = strip_slash(pose.header.frame_id);
   // With ~fixed_frame, a pose stamped at another time goes through it even from the camera frame itself (a
   // moving camera: DOPE's poses are in the optical frame of an earlier image).
   const bool time_travel =
@@ -98,6 +97,20 @@ diffdope::Pose RefinerNodelet::meshPoseInCamera(const geometry_msgs::PoseStamped
     throw std::runtime_error(what + ": the object is behind the camera (z = " + format_fixed(mesh_pose.t.z()) +
                              " m in '" + camera + "')");
   return mesh_pose;
+}
+
+void RefinerNodelet::resetOnTimeJump(const Frame& frame) {
+  const double stamp = frame.header.stamp.toSec();
+  const double back = last_frame_stamp_ - stamp;
+  last_frame_stamp_ = std::max(last_frame_stamp_, stamp);
+  if (!(back > 1.0)) return;  // frames arrive in order; a small step back is the synchronizer's approximation
+  last_frame_stamp_ = stamp;
+  for (auto& slot : slots_) {
+    slot->track.reset();
+    slot->tracking = false;
+  }
+  errors_.warn("time", "time went back by " + format_fixed(back, 2) + " s (image stamped " + format_fixed(stamp) +
+                           "; a looped bag or a restarted clock?): tracks and unused detections reset");
 }
 
 void RefinerNodelet::absorbDetections(const Frame& frame) {
@@ -137,6 +150,7 @@ void RefinerNodelet::updateTrackingFlags(double stamp) {
 
 void RefinerNodelet::processStreaming(const std::shared_ptr<const Frame>& frame) {
   if (!frame) return;
+  resetOnTimeJump(*frame);
   absorbDetections(*frame);
   SeedList seeds;
   const double stamp = frame->header.stamp.toSec();
@@ -188,6 +202,7 @@ diffdope_ros::Refine::Response RefinerNodelet::processRequest(const diffdope_ros
     return fail("iterations <= 1000 and batch_size <= 256 per call (the worker would be blocked for too long)");
   if (!frame) return fail("no synchronized frame received yet (check the input topics)");
 
+  resetOnTimeJump(*frame);
   absorbDetections(*frame);
   const double stamp = frame->header.stamp.toSec();
   SeedList seeds;

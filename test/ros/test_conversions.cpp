@@ -612,6 +612,13 @@ TEST(Poses, ZeroQuaternionThrowsNamingWhat) {
 
 }  // namespace
 
+TEST(Frames, LeadingSlashIsStripped) {
+  EXPECT_EQ(diffdope_ros::strip_slash("/camera_optical"), "camera_optical");
+  EXPECT_EQ(diffdope_ros::strip_slash("camera_optical"), "camera_optical");
+  EXPECT_EQ(diffdope_ros::strip_slash(""), "");
+  EXPECT_EQ(diffdope_ros::strip_slash("/"), "");
+}
+
 // catkin_add_gtest links gtest but not gtest_main: the one main() of diffdope_ros_unit_tests lives here.
 int main(int argc, char** argv) {
   testing::InitGoogleTest(&argc, argv);
