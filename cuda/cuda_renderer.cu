@@ -4,9 +4,9 @@
 // (grid.y = hypothesis); meshes and textures are uploaded once per mesh, observed images once per frame (pinned
 // staging), all on one stream; one small download per call brings back the loss sums and gradients.
 //
-// Differences from the CPU backend, by construction only in float summation order: per-pixel sums are reduced
-// in parallel (a warp sum, then a double atomic per warp). Compiled with --fmad=false, so single operations
-// round as on the CPU. The same pipeline runs on CPU threads in CI (src/core/emulated_renderer.cpp); the
+// Differences from the CPU backend: float summation order (per-pixel sums are reduced in parallel, a warp sum
+// then a double atomic per warp, in no fixed order) and the device's libm (log2f of the mip level may differ by
+// an ulp). Compiled with --fmad=false, so single arithmetic operations round as on the CPU. The same pipeline runs on CPU threads in CI (src/core/emulated_renderer.cpp); the
 // equivalence tests are test/unit/test_cuda_backend.cpp.
 #include <cuda_runtime.h>
 
@@ -23,22 +23,25 @@ namespace diffdope {
 namespace {
 
 void check(cudaError_t e, const char* what) {
-  if (e != cudaSuccess) throw std::runtime_error(std::string("CUDA backend: ") + what + ": " + cudaGetErrorString(e));
+  if (e == cudaSuccess) return;
+  cudaGetLastError();  // a failed allocation stays the "last error": a later launch check must not see it again
+  throw std::runtime_error(std::string("CUDA backend: ") + what + ": " + cudaGetErrorString(e));
 }
 
 template <class Stage>
 __global__ void for_each_kernel(Stage stage, int n) {
-  const int i = blockIdx.x * blockDim.x + threadIdx.x;
-  if (i < n) stage(i, int(blockIdx.y));
+  const long long i = static_cast<long long>(blockIdx.x) * blockDim.x + threadIdx.x;  // no int overflow near n
+  if (i < n) stage(int(i), int(blockIdx.y));
 }
 
 /// Every thread of a warp takes part in the warp sum, so the bound check is inside the stage.
 template <class Stage>
 __global__ void reduce_kernel(Stage stage, int n, double* out, int stride) {
-  const int i = blockIdx.x * blockDim.x + threadIdx.x, h = int(blockIdx.y);
+  const long long i = static_cast<long long>(blockIdx.x) * blockDim.x + threadIdx.x;
+  const int h = int(blockIdx.y);
   double v[Stage::kValues];
   for (int k = 0; k < Stage::kValues; ++k) v[k] = 0.0;
-  if (i < n) stage(i, h, v);
+  if (i < n) stage(int(i), h, v);
   for (int k = 0; k < Stage::kValues; ++k) {
     double s = v[k];
     for (int o = 16; o > 0; o >>= 1) s += __shfl_down_sync(0xffffffffu, s, o);
@@ -108,6 +111,7 @@ class CudaExec {
   template <class T>
   using Buffer = DeviceBuffer<T>;
   static constexpr int kThreads = 128;
+  static unsigned blocks(int n) { return static_cast<unsigned>((static_cast<long long>(n) + kThreads - 1) / kThreads); }
 
   CudaExec() { check(cudaStreamCreate(&stream_), "cudaStreamCreate"); }
   ~CudaExec() {
@@ -131,16 +135,20 @@ class CudaExec {
   template <class Stage>
   void for_each(int n, int B, const Stage& stage) {
     if (n <= 0 || B <= 0) return;
-    for_each_kernel<<<dim3((n + kThreads - 1) / kThreads, B), kThreads, 0, stream_>>>(stage, n);
+    for_each_kernel<<<dim3(blocks(n), B), kThreads, 0, stream_>>>(stage, n);
     check(cudaGetLastError(), "kernel launch");
   }
   template <class Stage>
   void reduce(int n, int B, const Stage& stage, double* out, int stride) {
     if (n <= 0 || B <= 0) return;
-    reduce_kernel<<<dim3((n + kThreads - 1) / kThreads, B), kThreads, 0, stream_>>>(stage, n, out, stride);
+    reduce_kernel<<<dim3(blocks(n), B), kThreads, 0, stream_>>>(stage, n, out, stride);
     check(cudaGetLastError(), "kernel launch");
   }
   void synchronize(const char* what) { check(cudaStreamSynchronize(stream_), what); }
+  void drain() {
+    cudaStreamSynchronize(stream_);
+    cudaGetLastError();
+  }
   const float* image(int slot, const cv::Mat& m, bool* changed) {
     while (int(images_.size()) <= slot) images_.push_back(std::make_unique<DeviceImage>());
     return images_[slot]->get(m, stream_, changed);
@@ -172,7 +180,7 @@ CudaDeviceInfo cuda_probe_device() {
   const cudaError_t e = cudaGetDeviceCount(&count);
   if (e != cudaSuccess) {
     info.reason = std::string("no usable CUDA device: ") + cudaGetErrorString(e);
-    cudaGetLastError();  // clear the sticky error so later calls start clean
+    cudaGetLastError();  // clear the error so later calls start clean
     return info;
   }
   if (count == 0) {
@@ -181,6 +189,7 @@ CudaDeviceInfo cuda_probe_device() {
   }
   cudaDeviceProp prop{};
   if (cudaGetDeviceProperties(&prop, 0) != cudaSuccess) {
+    cudaGetLastError();
     info.reason = "cannot read CUDA device 0's properties";
     return info;
   }

@@ -1,4 +1,5 @@
 #pragma once
+#include <cstdint>
 // Triangle mesh in metres (model frame), with what the renderer needs: UVs + textures or vertex colours, and an
 // edge adjacency built on welded positions so that vertices duplicated at UV seams do not look like borders.
 #include <Eigen/Core>
@@ -73,6 +74,10 @@ class Mesh {
   /// from outside, so the renderer may cull them).
   bool closed_and_outward() const { return closed_outward_; }
 
+  /// Identifies the content as of the last finalize(): unique per finalize() call in this process, kept by
+  /// copies (same content). Renderers key their uploads on it. 0 = never finalized.
+  uint64_t content_id() const { return content_id_; }
+
   /// Kernel view over host memory; valid while this mesh and `texture_storage` live and are not modified.
   MeshView view(std::vector<TextureView>& texture_storage) const;
 
@@ -85,6 +90,7 @@ class Mesh {
   std::vector<unsigned char> seams_;
   std::vector<float> tri_uv_area_;
   bool closed_outward_ = false;
+  uint64_t content_id_ = 0;
 };
 
 /// Writes an ASCII PLY (BOP layout: positions times `units_per_metre`, e.g. 1000 for millimetres; texture_u/v and

@@ -11,6 +11,7 @@
 //   for_each(n, B, stage)            stage(i, h) for i < n, h < B
 //   reduce(n, B, stage, out, stride) out[stride * h + k] += sum over i of stage(i, h, v)[k], k < Stage::kValues
 //   synchronize(what)                waits for the queued work; throws naming `what` on an error
+//   drain()                          waits for the queued work, ignoring errors (after a failed call)
 //   image(slot, mat, &changed)       an observed CV_32F image on the executor, re-uploaded (changed = true)
 //                                    only when its content differs from the slot's last one
 //   results(n)                       host memory for n doubles of results (pinned on CUDA)
@@ -21,6 +22,7 @@
 #include <cstdint>
 #include <cstring>
 #include <deque>
+#include <exception>
 #include <limits>
 #include <map>
 #include <memory>
@@ -54,6 +56,7 @@ class BatchedRenderer final : public Renderer {
                                    observed_mask.rows != camera.height))
       throw std::invalid_argument("render: observed mask must be CV_32FC1 of the camera's size");
     if (poses.empty()) return {};
+    const Drain drain(exec_);
     const PixelRect box = mask_box(observed_mask, camera.width, camera.height, false);
     const Call c = forward(camera, {ObjectCall{&mesh, &poses, nullptr, nullptr, box}}, false);
     const size_t N = size_t(c.pixels);
@@ -74,6 +77,7 @@ class BatchedRenderer final : public Renderer {
 
   void evaluate(const Camera& camera, const Mesh& mesh, const Observation& obs, const std::vector<Pose>& poses,
                 const LossOptions& loss, bool with_gradient, std::vector<LossValue>& out) override {
+    const Drain drain(exec_);
     obs.validate(camera);
     check_loss(loss);
     out.assign(poses.size(), LossValue());
@@ -87,6 +91,7 @@ class BatchedRenderer final : public Renderer {
 
   void evaluate_objects(const Camera& camera, const Observation& frame, const std::vector<ObjectBatch>& objects,
                         bool with_gradient, std::vector<std::vector<LossValue>>& out) override {
+    const Drain drain(exec_);
     out.assign(objects.size(), {});
     std::vector<Observation> views(objects.size());
     for (size_t k = 0; k < objects.size(); ++k) {  // everything is checked before anything runs
@@ -112,6 +117,16 @@ class BatchedRenderer final : public Renderer {
   }
 
  private:
+  /// When a call throws with work still queued, waits for it (ignoring its errors) before anything it uses can
+  /// be freed or reused by the next call.
+  struct Drain {
+    Exec& exec;
+    int exceptions = std::uncaught_exceptions();
+    explicit Drain(Exec& e) : exec(e) {}
+    ~Drain() {
+      if (std::uncaught_exceptions() > exceptions) exec.drain();
+    }
+  };
   /// An object's loss constants and mask box, kept while its inputs stay the same: computing them reads the whole
   /// mask and depth image (~0.5 ms at 960x540), more than a GPU iteration's budget allows on every call.
   struct SetupCache {
@@ -147,9 +162,6 @@ class BatchedRenderer final : public Renderer {
     typename Exec::template Buffer<float> tri_uv_area;
     std::vector<std::unique_ptr<typename Exec::template Buffer<float>>> texels;  // one per texture level
     typename Exec::template Buffer<TextureView> textures;
-    // What the upload was made from (the cache is keyed by the Mesh's address, which a new mesh may reuse).
-    const void* positions_host = nullptr;
-    Vec3f first{}, last{};
     MeshView view{};
     uint64_t used = 0;  // uses_ at the last call that used it
   };
@@ -160,16 +172,13 @@ class BatchedRenderer final : public Renderer {
   }
 
   const MeshView& upload_mesh(const Mesh& mesh) {
-    if (mesh.num_triangles() == 0 || mesh.neighbors().size() != mesh.triangles.size())
+    if (mesh.num_triangles() == 0 || mesh.neighbors().size() != mesh.triangles.size() || mesh.content_id() == 0)
       throw std::invalid_argument("renderer: mesh '" + mesh.name + "' is empty or not finalized");
     ++uses_;
-    auto& slot = meshes_[&mesh];
-    // Keyed by the Mesh's address; counts, the positions' storage and two vertices confirm it is the same mesh
-    // (a new mesh at a reused address is uploaded again).
-    const auto same = [](Vec3f a, Vec3f b) { return a.x == b.x && a.y == b.y && a.z == b.z; };
-    if (slot && slot->view.num_vertices == mesh.num_vertices() && slot->view.num_triangles == mesh.num_triangles() &&
-        slot->positions_host == mesh.positions.data() && same(slot->first, mesh.positions.front()) &&
-        same(slot->last, mesh.positions.back())) {
+    // Keyed by the content id finalize() gives (an address can be reused by another mesh; a copy shares the
+    // content and the id). The counts guard against a mesh resized after finalize() without a new one.
+    auto& slot = meshes_[mesh.content_id()];
+    if (slot && slot->view.num_vertices == mesh.num_vertices() && slot->view.num_triangles == mesh.num_triangles()) {
       slot->used = uses_;
       return slot->view;
     }
@@ -198,9 +207,6 @@ class BatchedRenderer final : public Renderer {
       }
     if (!exec_views.empty()) exec_.upload(d.textures, exec_views.data(), exec_views.size());
     exec_.synchronize("mesh upload");  // host_views / exec_views are about to go away
-    d.positions_host = mesh.positions.data();
-    d.first = mesh.positions.front();
-    d.last = mesh.positions.back();
     d.view = h;
     d.view.positions = d.positions.ptr;
     d.view.colors = d.colors.ptr;
@@ -317,7 +323,8 @@ class BatchedRenderer final : public Renderer {
     // Bands of rows per triangle, so a few big triangles (a box seen close up) still spread over many threads:
     // about 4 rows per thread for a triangle of average size (projected area ~ 2 * region / triangles).
     const double mean_rows = std::sqrt(2.0 * c.max_pixels / std::max(1, c.max_triangles));
-    const int bands = std::max(1, std::min({64, int(std::ceil(mean_rows / 4.0)), INT_MAX / std::max(1, c.max_triangles)}));
+    const int bands = std::max(
+        1, std::min({64, int(std::ceil(mean_rows / 4.0)), (INT_MAX - 1024) / std::max(1, c.max_triangles)}));
     exec_.for_each(c.max_triangles * bands, c.B, RasterStage{p, bands});
     exec_.for_each(c.max_pixels, c.B, ShadeStage{p});
     exec_.for_each(c.max_pixels, c.B, BlendDetectStage{p});
@@ -412,7 +419,7 @@ class BatchedRenderer final : public Renderer {
   }
 
   Exec exec_;
-  std::map<const Mesh*, std::unique_ptr<ExecMesh>> meshes_;
+  std::map<uint64_t, std::unique_ptr<ExecMesh>> meshes_;  // by Mesh::content_id()
   uint64_t uses_ = 0, call_start_ = 0;
   std::vector<Hypothesis> hyp_;
   std::vector<ObjectParams> object_params_;

@@ -62,6 +62,7 @@ class EmulatedExec {
     });
   }
   void synchronize(const char*) {}
+  void drain() {}
   /// A copy of the image per slot, replaced only when the content differs (as the CUDA executor's staging).
   const float* image(int slot, const cv::Mat& m, bool* changed) {
     if (int(images_.size()) <= slot) images_.resize(slot + 1);

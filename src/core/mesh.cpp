@@ -1,5 +1,6 @@
 #include "diffdope/mesh.hpp"
 
+#include <atomic>
 #include <Eigen/Geometry>
 #include <algorithm>
 #include <cmath>
@@ -78,6 +79,8 @@ void Mesh::finalize() {
   diameter_ = compute_diameter(positions);
   build_adjacency();
   build_mipmaps();
+  static std::atomic<uint64_t> next_id{1};  // renderers key their uploads on it (an address can be reused)
+  content_id_ = next_id++;
 }
 
 void Mesh::build_mipmaps() {

@@ -274,6 +274,23 @@ TEST_P(BatchedBackend, SeesEveryChangeOfItsInputs) {
   check(obs, loss, "mask back");
 }
 
+// A mesh whose texture changed in place (same address, same vertices) is uploaded again once re-finalized.
+TEST_P(BatchedBackend, ReFinalizedMeshIsUploadedAgain) {
+  const Camera cam = test_camera();
+  auto cpu = make_cpu_renderer();
+  auto gpu = make();
+  Case c = cases()[0];
+  const Observation obs = observe(*cpu, cam, c.mesh, c.truth);
+  std::vector<LossValue> before, after, ref;
+  gpu->evaluate(cam, c.mesh, obs, {c.truth}, LossOptions(), true, before);
+  for (float& v : c.mesh.textures[0].rgb) v = 1.f - v;  // the same mesh object, another texture
+  c.mesh.finalize();
+  gpu->evaluate(cam, c.mesh, obs, {c.truth}, LossOptions(), true, after);
+  cpu->evaluate(cam, c.mesh, obs, {c.truth}, LossOptions(), true, ref);
+  EXPECT_GT(after[0].rgb, before[0].rgb + 0.05);
+  EXPECT_NEAR(after[0].total, ref[0].total, 1e-5);
+}
+
 // More meshes than the upload cache keeps (64): the least recently used are dropped and uploaded again when
 // they come back, with the same results; a call with many objects keeps all of its own.
 TEST_P(BatchedBackend, ManyMeshesComeAndGo) {
@@ -299,8 +316,10 @@ TEST_P(BatchedBackend, ManyMeshesComeAndGo) {
     cpu->evaluate(cam, meshes[k], obs, {pose}, LossOptions(), true, ref);
     gpu->evaluate(cam, meshes[k], obs, {pose}, LossOptions(), true, one);
     EXPECT_NEAR(alone[k], ref[0].total, 1e-5) << k;
-    EXPECT_EQ(together[k][0].total, alone[k]) << k;
-    EXPECT_EQ(one[0].total, alone[k]) << k;
+    // Bit for bit on the emulation; device atomics add in no fixed order.
+    const double tol = GetParam() == "cuda" ? 1e-9 * std::max(1.0, alone[k]) : 0.0;
+    EXPECT_NEAR(together[k][0].total, alone[k], tol) << k;
+    EXPECT_NEAR(one[0].total, alone[k], tol) << k;
   }
 }
 
