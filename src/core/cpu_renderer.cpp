@@ -65,11 +65,20 @@ class CpuRenderer final : public Renderer {
                                   const cv::Mat& observed_mask) override;
   void evaluate(const Camera& camera, const Mesh& mesh, const Observation& observed, const std::vector<Pose>& poses,
                 const LossOptions& loss, bool with_gradient, std::vector<LossValue>& out) override;
+  /// All hypotheses of all objects share the threads (one parallel loop), so a frame with several objects keeps
+  /// every core busy even when each object has only a few runs left.
+  void evaluate_objects(const Camera& camera, const Observation& frame, const std::vector<ObjectBatch>& objects,
+                        bool with_gradient, std::vector<std::vector<LossValue>>& out) override;
 
  private:
   /// `mask` widens the region of interest; when empty, `no_mask_means_everywhere` says whether S is then
-  /// implicitly 1 on the whole image (loss evaluation) or absent (plain rendering).
-  CallContext make_context(const Camera& camera, const Mesh& mesh, const cv::Mat& mask, bool no_mask_means_everywhere);
+  /// implicitly 1 on the whole image (loss evaluation) or absent (plain rendering). `views` holds the mesh's
+  /// texture views while the context is in use.
+  CallContext make_context(const Camera& camera, const Mesh& mesh, const cv::Mat& mask, bool no_mask_means_everywhere,
+                           std::vector<TextureView>& views);
+  /// Loss (and gradient) of one hypothesis.
+  void evaluate_hypothesis(const CallContext& ctx, const LossSetup& setup, const Observation& obs, const Pose& pose,
+                           bool with_gradient, Workspace& ws, LossValue& res) const;
   /// Vertex, triangle, raster, shading and blend stages. Returns the region that was rendered.
   Rect rasterize(const CallContext& ctx, const Pose& pose, Workspace& ws, bool keep_events) const;
 
@@ -79,12 +88,12 @@ class CpuRenderer final : public Renderer {
 };
 
 CallContext CpuRenderer::make_context(const Camera& camera, const Mesh& mesh, const cv::Mat& mask,
-                                      bool no_mask_means_everywhere) {
+                                      bool no_mask_means_everywhere, std::vector<TextureView>& views) {
   camera.validate();
   if (mesh.num_triangles() == 0 || mesh.neighbors().size() != mesh.triangles.size())
     throw std::invalid_argument("renderer: mesh '" + mesh.name + "' is empty or not finalized");
   CallContext ctx;
-  ctx.mesh = mesh.view(texture_views_);
+  ctx.mesh = mesh.view(views);
   ctx.K = camera.intrinsics();
   ctx.near_z = static_cast<float>(options_.near_plane);
   ctx.cull = options_.cull_back_faces || (options_.auto_cull_closed && mesh.closed_and_outward());
@@ -209,7 +218,7 @@ std::vector<RenderImage> CpuRenderer::render(const Camera& camera, const Mesh& m
   if (!observed_mask.empty() && (observed_mask.type() != CV_32FC1 || observed_mask.cols != camera.width ||
                                  observed_mask.rows != camera.height))
     throw std::invalid_argument("render: observed mask must be CV_32FC1 of the camera's size");
-  const CallContext ctx = make_context(camera, mesh, observed_mask, false);
+  const CallContext ctx = make_context(camera, mesh, observed_mask, false, texture_views_);
   std::vector<RenderImage> out(poses.size());
   pool_.parallel_for(static_cast<int>(poses.size()), [&](int h, int worker) {
     Workspace& ws = workspaces_[worker];
@@ -224,92 +233,120 @@ void CpuRenderer::evaluate(const Camera& camera, const Mesh& mesh, const Observa
                            std::vector<LossValue>& out) {
   obs.validate(camera);
   if (!(loss.depth_truncation > 0)) throw std::invalid_argument("loss: depth_truncation must be > 0");
-  const CallContext ctx = make_context(camera, mesh, obs.mask, true);
-
+  const CallContext ctx = make_context(camera, mesh, obs.mask, true, texture_views_);
   const LossSetup setup = make_loss_setup(camera, obs, loss);
-  const PixelLossParams& P = setup.P;
-  const float k_edges = setup.k_edges, edge_scale = setup.edge_scale;
-
   out.assign(poses.size(), LossValue());
   pool_.parallel_for(static_cast<int>(poses.size()), [&](int h, int worker) {
-    Workspace& ws = workspaces_[worker];
-    LossValue& res = out[h];
-    if (!poses[h].is_valid(1e-3)) {
-      res.rgb = res.depth = res.mask = res.total = std::numeric_limits<double>::infinity();
-      return;  // a NaN or non-rotation pose gets an infinite loss, never a gradient
+    evaluate_hypothesis(ctx, setup, obs, poses[h], with_gradient, workspaces_[worker], out[h]);
+  });
+}
+
+void CpuRenderer::evaluate_objects(const Camera& camera, const Observation& frame,
+                                   const std::vector<ObjectBatch>& objects, bool with_gradient,
+                                   std::vector<std::vector<LossValue>>& out) {
+  const size_t n = objects.size();
+  std::vector<Observation> obs(n);
+  std::vector<std::vector<TextureView>> views(n);
+  std::vector<CallContext> ctx(n);
+  std::vector<LossSetup> setups(n);
+  std::vector<std::pair<int, int>> work;  // (object, hypothesis)
+  out.assign(n, {});
+  for (size_t k = 0; k < n; ++k) {  // everything is checked before anything runs
+    const ObjectBatch& b = objects[k];
+    if (!b.mesh) throw std::invalid_argument("evaluate_objects: object " + std::to_string(k) + " has no mesh");
+    obs[k].rgb = frame.rgb, obs[k].depth = frame.depth, obs[k].edges = frame.edges, obs[k].mask = b.mask;
+    obs[k].validate(camera);
+    if (!(b.loss.depth_truncation > 0)) throw std::invalid_argument("loss: depth_truncation must be > 0");
+    ctx[k] = make_context(camera, *b.mesh, b.mask, true, views[k]);
+    setups[k] = make_loss_setup(camera, obs[k], b.loss);
+    out[k].assign(b.poses.size(), LossValue());
+    for (size_t j = 0; j < b.poses.size(); ++j) work.emplace_back(int(k), int(j));
+  }
+  pool_.parallel_for(static_cast<int>(work.size()), [&](int w, int worker) {
+    const auto [k, j] = work[w];
+    evaluate_hypothesis(ctx[k], setups[k], obs[k], objects[k].poses[j], with_gradient, workspaces_[worker], out[k][j]);
+  });
+}
+
+void CpuRenderer::evaluate_hypothesis(const CallContext& ctx, const LossSetup& setup, const Observation& obs,
+                                      const Pose& pose, bool with_gradient, Workspace& ws, LossValue& res) const {
+  const PixelLossParams& P = setup.P;
+  const float k_edges = setup.k_edges, edge_scale = setup.edge_scale;
+  if (!pose.is_valid(1e-3)) {
+    res.rgb = res.depth = res.mask = res.total = std::numeric_limits<double>::infinity();
+    return;  // a NaN or non-rotation pose gets an infinite loss, never a gradient
+  }
+  const Rect roi = rasterize(ctx, pose, ws, with_gradient);
+  const ProjectedView G = projected_view(ws);
+  const int W = roi.width(), N = W * roi.height();
+  if (with_gradient) ws.g_post.resize(N);
+  double sum_rgb = 0, sum_depth = 0, sum_mask = 0;
+  static const float kZero3[3] = {0.f, 0.f, 0.f};
+  for (int y = roi.y0; y < roi.y1; ++y) {
+    const float* mrow = obs.has_mask() ? obs.mask.ptr<float>(y) : nullptr;
+    const float* crow = obs.has_rgb() ? obs.rgb.ptr<float>(y) : nullptr;
+    const float* drow = obs.has_depth() ? obs.depth.ptr<float>(y) : nullptr;
+    for (int x = roi.x0; x < roi.x1; ++x) {
+      const int i = (y - roi.y0) * W + (x - roi.x0);
+      const float S = mrow ? mrow[x] : 1.f;
+      const float* I = crow ? crow + 3 * x : kZero3;
+      const float Id = drow ? drow[x] : 0.f;  // to_depth_metres maps NaN / negative to 0: no reading
+      const PixelAttr& a = ws.post[i];
+      PixelLossGrad g;
+      const PixelLossValue v = pixel_loss_step(P, S, I, Id, a.cov, a.c, a.d, with_gradient ? &g : nullptr);
+      sum_rgb += v.rgb;
+      sum_depth += v.depth;
+      sum_mask += v.mask;
+      if (with_gradient) ws.g_post[i] = PixelAttr{g.cov, {g.c[0], g.c[1], g.c[2]}, g.d};
     }
-    const Rect roi = rasterize(ctx, poses[h], ws, with_gradient);
-    const ProjectedView G = projected_view(ws);
-    const int W = roi.width(), N = W * roi.height();
-    if (with_gradient) ws.g_post.resize(N);
-    double sum_rgb = 0, sum_depth = 0, sum_mask = 0;
-    static const float kZero3[3] = {0.f, 0.f, 0.f};
+  }
+  double sum_edges = 0;
+  if (k_edges != 0.f) {
+    // Edge term: compare the observed edge map with the render's differentiable edge map over S.
+    const int H = roi.height();
+    ws.grey.resize(N);
+    for (int i = 0; i < N; ++i) ws.grey[i] = (ws.post[i].c[0] + ws.post[i].c[1] + ws.post[i].c[2]) / 3.f;
+    if (with_gradient) {
+      ws.g_sobel_x.resize(N);  // edge_term_step writes every pixel
+      ws.g_sobel_y.resize(N);
+    }
     for (int y = roi.y0; y < roi.y1; ++y) {
       const float* mrow = obs.has_mask() ? obs.mask.ptr<float>(y) : nullptr;
-      const float* crow = obs.has_rgb() ? obs.rgb.ptr<float>(y) : nullptr;
-      const float* drow = obs.has_depth() ? obs.depth.ptr<float>(y) : nullptr;
+      const float* erow = obs.edges.ptr<float>(y);
       for (int x = roi.x0; x < roi.x1; ++x) {
-        const int i = (y - roi.y0) * W + (x - roi.x0);
+        const int lx = x - roi.x0, ly = y - roi.y0;
         const float S = mrow ? mrow[x] : 1.f;
-        const float* I = crow ? crow + 3 * x : kZero3;
-        const float Id = drow ? drow[x] : 0.f;  // to_depth_metres maps NaN / negative to 0: no reading
-        const PixelAttr& a = ws.post[i];
-        PixelLossGrad g;
-        const PixelLossValue v = pixel_loss_step(P, S, I, Id, a.cov, a.c, a.d, with_gradient ? &g : nullptr);
-        sum_rgb += v.rgb;
-        sum_depth += v.depth;
-        sum_mask += v.mask;
-        if (with_gradient) ws.g_post[i] = PixelAttr{g.cov, {g.c[0], g.c[1], g.c[2]}, g.d};
+        sum_edges += edge_term_step(ws.grey.data(), W, H, lx, ly, edge_scale, S, erow[x], k_edges,
+                                    with_gradient ? &ws.g_sobel_x[ly * W + lx] : nullptr,
+                                    with_gradient ? &ws.g_sobel_y[ly * W + lx] : nullptr);
       }
     }
-    double sum_edges = 0;
-    if (k_edges != 0.f) {
-      // Edge term: compare the observed edge map with the render's differentiable edge map over S.
-      const int H = roi.height();
-      ws.grey.resize(N);
-      for (int i = 0; i < N; ++i) ws.grey[i] = (ws.post[i].c[0] + ws.post[i].c[1] + ws.post[i].c[2]) / 3.f;
-      if (with_gradient) {
-        ws.g_sobel_x.resize(N);  // edge_term_step writes every pixel
-        ws.g_sobel_y.resize(N);
-      }
-      for (int y = roi.y0; y < roi.y1; ++y) {
-        const float* mrow = obs.has_mask() ? obs.mask.ptr<float>(y) : nullptr;
-        const float* erow = obs.edges.ptr<float>(y);
-        for (int x = roi.x0; x < roi.x1; ++x) {
-          const int lx = x - roi.x0, ly = y - roi.y0;
-          const float S = mrow ? mrow[x] : 1.f;
-          sum_edges += edge_term_step(ws.grey.data(), W, H, lx, ly, edge_scale, S, erow[x], k_edges,
-                                      with_gradient ? &ws.g_sobel_x[ly * W + lx] : nullptr,
-                                      with_gradient ? &ws.g_sobel_y[ly * W + lx] : nullptr);
+    if (with_gradient)
+      for (int ly = 0; ly < H; ++ly)
+        for (int lx = 0; lx < W; ++lx) {
+          const float g = grey_gradient(ws.g_sobel_x.data(), ws.g_sobel_y.data(), W, H, lx, ly) / 3.f;
+          for (int ch = 0; ch < 3; ++ch) ws.g_post[ly * W + lx].c[ch] += g;
         }
-      }
-      if (with_gradient)
-        for (int ly = 0; ly < H; ++ly)
-          for (int lx = 0; lx < W; ++lx) {
-            const float g = grey_gradient(ws.g_sobel_x.data(), ws.g_sobel_y.data(), W, H, lx, ly) / 3.f;
-            for (int ch = 0; ch < 3; ++ch) ws.g_post[ly * W + lx].c[ch] += g;
-          }
-    }
-    finish_loss(setup, sum_rgb, sum_depth, sum_mask, sum_edges, &res);
-    if (!with_gradient) return;
+  }
+  finish_loss(setup, sum_rgb, sum_depth, sum_mask, sum_edges, &res);
+  if (!with_gradient) return;
 
-    double grad[6] = {0, 0, 0, 0, 0, 0};
-    ws.g_pre = ws.g_post;
-    for (const BlendEvent& e : ws.events)
-      blend_backward(ctx.mesh, G, ctx.K, e, ws.pre[e.to], ws.g_post[e.to], &ws.g_pre[e.to], grad);
-    for (int y = roi.y0; y < roi.y1; ++y) {
-      for (int x = roi.x0; x < roi.x1; ++x) {
-        const int i = (y - roi.y0) * W + (x - roi.x0);
-        const int t = ws.tri[i];
-        if (t < 0) continue;
-        const PixelAttr& g = ws.g_pre[i];
-        if (g.c[0] == 0.f && g.c[1] == 0.f && g.c[2] == 0.f && g.d == 0.f) continue;
-        shade_pixel_backward(ctx.mesh, G, ctx.K, t, static_cast<float>(x), static_cast<float>(y),
-                             Vec3f{g.c[0], g.c[1], g.c[2]}, g.d, grad, false, &ws.bary[i]);
-      }
+  double grad[6] = {0, 0, 0, 0, 0, 0};
+  ws.g_pre = ws.g_post;
+  for (const BlendEvent& e : ws.events)
+    blend_backward(ctx.mesh, G, ctx.K, e, ws.pre[e.to], ws.g_post[e.to], &ws.g_pre[e.to], grad);
+  for (int y = roi.y0; y < roi.y1; ++y) {
+    for (int x = roi.x0; x < roi.x1; ++x) {
+      const int i = (y - roi.y0) * W + (x - roi.x0);
+      const int t = ws.tri[i];
+      if (t < 0) continue;
+      const PixelAttr& g = ws.g_pre[i];
+      if (g.c[0] == 0.f && g.c[1] == 0.f && g.c[2] == 0.f && g.d == 0.f) continue;
+      shade_pixel_backward(ctx.mesh, G, ctx.K, t, static_cast<float>(x), static_cast<float>(y),
+                           Vec3f{g.c[0], g.c[1], g.c[2]}, g.d, grad, false, &ws.bary[i]);
     }
-    for (int k = 0; k < 6; ++k) res.gradient[k] = grad[k];
-  });
+  }
+  for (int k = 0; k < 6; ++k) res.gradient[k] = grad[k];
 }
 
 }  // namespace

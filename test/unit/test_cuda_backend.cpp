@@ -223,6 +223,37 @@ TEST_P(BatchedBackend, SeveralObjectsInOneCallMatchOneByOne) {
   }
 }
 
+// The CPU backend's evaluate_objects (one parallel loop over every hypothesis of every object) gives exactly what
+// evaluate gives per object.
+TEST(CpuBackend, SeveralObjectsInOneCallAreEvaluatedAsOneByOne) {
+  const Camera cam = test_camera();
+  auto cpu = make_cpu_renderer();
+  const std::vector<Case> cs = cases();
+  Observation frame = observe(*cpu, cam, cs[1].mesh, cs[1].truth);
+  std::vector<ObjectBatch> objects(cs.size());
+  for (size_t k = 0; k < cs.size(); ++k) {
+    objects[k].mesh = &cs[k].mesh;
+    if (k != 0) objects[k].mask = observe(*cpu, cam, cs[k].mesh, cs[k].truth).mask;
+    objects[k].poses = {cs[k].test, cs[k].truth, cs[k].test.updated((Vector6d() << 0, 0.01, 0, 0.1, 0, 0).finished())};
+    objects[k].loss.weight_depth = 1.0 + k;
+  }
+  std::vector<std::vector<LossValue>> together;
+  cpu->evaluate_objects(cam, frame, objects, true, together);
+  for (size_t k = 0; k < cs.size(); ++k) {
+    Observation o = frame;
+    o.mask = objects[k].mask;
+    std::vector<LossValue> alone;
+    cpu->evaluate(cam, cs[k].mesh, o, objects[k].poses, objects[k].loss, true, alone);
+    ASSERT_EQ(alone.size(), together[k].size());
+    for (size_t h = 0; h < alone.size(); ++h) {
+      EXPECT_EQ(alone[h].total, together[k][h].total) << cs[k].name << " " << h;
+      EXPECT_EQ(alone[h].gradient, together[k][h].gradient) << cs[k].name << " " << h;
+    }
+  }
+  objects[1].loss.depth_truncation = 0;  // one bad object: the call refuses before doing anything
+  EXPECT_THROW(cpu->evaluate_objects(cam, frame, objects, true, together), std::invalid_argument);
+}
+
 TEST_P(BatchedBackend, BadInputIsRefusedClearly) {
   const Camera cam = test_camera();
   auto gpu = make();
