@@ -370,7 +370,9 @@ void RefinerNodelet::onWatchdog(const ros::WallTimerEvent&) {
         << (use_depth_ ? ", " + depth_sub_.getTopic() : "") << (use_mask_ ? ", " + mask_sub_.getTopic() : "") << ")";
     errors_.error("sync", msg.str());
   }
-  if (diagnostics_) diagnostics_->update();
+  // force_update: this timer already paces it (1 s of wall time). update() gates on ros::Time, which under sim
+  // time stops publishing after the clock jumps back (a looped bag) until it catches up again.
+  if (diagnostics_) diagnostics_->force_update();
 }
 
 void RefinerNodelet::onDiagnostics(diagnostic_updater::DiagnosticStatusWrapper& stat) {
