@@ -32,6 +32,7 @@ class EmulatedExec {
   template <class T>
   using Buffer = HostBuffer<T>;
 
+  explicit EmulatedExec(int threads) : pool_(threads) {}  // RenderOptions::threads (0 = all)
   std::string name() const { return "cuda-emulated"; }
   template <class T>
   void upload(Buffer<T>& b, const T* host, size_t n) {
@@ -90,7 +91,7 @@ class EmulatedExec {
 }  // namespace
 
 std::unique_ptr<Renderer> make_emulated_cuda_renderer(const RenderOptions& options) {
-  return std::make_unique<batched::BatchedRenderer<EmulatedExec>>(options);
+  return std::make_unique<batched::BatchedRenderer<EmulatedExec>>(options, options.threads);
 }
 
 }  // namespace diffdope

@@ -254,6 +254,24 @@ TEST(CpuBackend, SeveralObjectsInOneCallAreEvaluatedAsOneByOne) {
   EXPECT_THROW(cpu->evaluate_objects(cam, frame, objects, true, together), std::invalid_argument);
 }
 
+// The emulated executor honours RenderOptions::threads, with the same results on 1 and 2 threads.
+TEST(CudaEmulated, OneThreadGivesWhatTwoGive) {
+  const Camera cam = test_camera();
+  const Case c = cases()[2];
+  const Observation obs = observe(*make_cpu_renderer(), cam, c.mesh, c.truth);
+  RenderOptions one, two;
+  one.threads = 1;
+  two.threads = 2;
+  std::vector<LossValue> a, b;
+  const std::vector<Pose> poses = {c.test, c.truth, c.test, c.truth};
+  make_emulated_cuda_renderer(one)->evaluate(cam, c.mesh, obs, poses, LossOptions(), true, a);
+  make_emulated_cuda_renderer(two)->evaluate(cam, c.mesh, obs, poses, LossOptions(), true, b);
+  for (size_t h = 0; h < poses.size(); ++h) {
+    EXPECT_EQ(a[h].total, b[h].total);
+    EXPECT_EQ(a[h].gradient, b[h].gradient);
+  }
+}
+
 TEST_P(BatchedBackend, BadInputIsRefusedClearly) {
   const Camera cam = test_camera();
   auto gpu = make();
