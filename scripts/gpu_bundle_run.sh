@@ -18,7 +18,7 @@ fi
 status=0
 nvidia-smi --query-gpu=name,driver_version,memory.total,compute_cap --format=csv 2>&1 | tee "$out/device.txt"
 echo "== CUDA tests (and the emulated pipeline) =="
-"${run[@]}" "$here/bin/diffdope_cuda_checks" 2>&1 | tee "$out/tests.log"
+"${run[@]}" "$here/bin/diffdope_cuda_tests" 2>&1 | tee "$out/tests.log"
 [[ ${PIPESTATUS[0]} -eq 0 ]] || status=1
 no_device=0
 grep -q 'SKIPPED \] .*/Cuda' "$out/tests.log" && no_device=1
@@ -26,7 +26,7 @@ cs=$(command -v compute-sanitizer || echo /usr/local/cuda/bin/compute-sanitizer)
 if [[ $no_device -eq 0 && -x "$cs" ]]; then
   for tool in memcheck racecheck; do
     echo "== compute-sanitizer --tool $tool =="
-    "$cs" --tool "$tool" --error-exitcode 3 "${run[@]}" "$here/bin/diffdope_cuda_checks" --gtest_filter='*/Cuda' \
+    "$cs" --tool "$tool" --error-exitcode 3 "${run[@]}" "$here/bin/diffdope_cuda_tests" --gtest_filter='*/Cuda' \
       > "$out/sanitizer_$tool.log" 2>&1 || { echo "compute-sanitizer $tool failed"; status=1; }
     tail -4 "$out/sanitizer_$tool.log"
   done
