@@ -122,7 +122,8 @@ class Refiner {
   /// Refines every object of one frame (the frame's rgb and depth, each object's own mask). An object whose
   /// input is unusable gets its reason in RefineResult::error (pose = initial, plausible = false); the others
   /// are still refined. The objects run in lockstep: each iteration evaluates the runs of all objects in one
-  /// renderer call (one launch per stage on CUDA; one object after the other on the CPU, each using all threads).
+  /// renderer call (one launch per stage on CUDA; one parallel loop over all their runs on the CPU), and the
+  /// frame is resized once for all of them.
   /// Each result is what refine() would give for that object alone; on_iteration is not called.
   std::vector<RefineResult> refine_all(const Camera& camera, const Observation& frame,
                                        const std::vector<ObjectTarget>& objects);

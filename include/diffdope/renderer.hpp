@@ -89,19 +89,28 @@ class Renderer {
                                           const cv::Mat& observed_mask = cv::Mat()) = 0;
 
   /// Loss of each pose against `observed` (and gradients when `with_gradient`). `out` is resized to poses.size().
-  virtual void evaluate(const Camera& camera, const Mesh& mesh, const Observation& observed,
-                        const std::vector<Pose>& poses, const LossOptions& loss, bool with_gradient,
-                        std::vector<LossValue>& out) = 0;
+  /// One object of evaluate_objects(), with `observed`'s mask.
+  void evaluate(const Camera& camera, const Mesh& mesh, const Observation& observed, const std::vector<Pose>& poses,
+                const LossOptions& loss, bool with_gradient, std::vector<LossValue>& out);
 
   /// Several objects of one frame at once: `frame` gives the shared rgb / depth / edges (its mask is ignored),
-  /// each object its mask, loss options and poses; out[k] is as evaluate() gives for object k. The default
-  /// calls evaluate() per object; the CUDA backend runs all hypotheses of all objects in each launch.
+  /// each object its mask, loss options and poses; out[k] receives object k's values. The CPU backend shares
+  /// its threads among all hypotheses of all objects; the CUDA backend runs them all in each launch. Input is
+  /// checked before anything runs: std::invalid_argument naming the object and the problem.
   virtual void evaluate_objects(const Camera& camera, const Observation& frame, const std::vector<ObjectBatch>& objects,
-                                bool with_gradient, std::vector<std::vector<LossValue>>& out);
+                                bool with_gradient, std::vector<std::vector<LossValue>>& out) = 0;
 
  protected:
   explicit Renderer(const RenderOptions& options) : options_(options) {}
+  /// Each object's observation (the frame's rgb / depth / edges with its own mask), checked against the camera,
+  /// with the object's mesh and loss constants: what every backend's evaluate_objects() starts from.
+  static std::vector<Observation> object_observations(const Camera& camera, const Observation& frame,
+                                                      const std::vector<ObjectBatch>& objects);
   RenderOptions options_;
+
+ private:
+  std::vector<ObjectBatch> one_object_;  // evaluate()'s scratch, kept so that its capacity is reused
+  std::vector<std::vector<LossValue>> one_result_;
 };
 
 /// The multithreaded CPU backend.

@@ -75,34 +75,12 @@ class BatchedRenderer final : public Renderer {
     return out;
   }
 
-  void evaluate(const Camera& camera, const Mesh& mesh, const Observation& obs, const std::vector<Pose>& poses,
-                const LossOptions& loss, bool with_gradient, std::vector<LossValue>& out) override {
-    const Drain drain(exec_);
-    obs.validate(camera);
-    check_loss(loss);
-    out.assign(poses.size(), LossValue());
-    if (poses.empty()) return;
-    const FrameImages f = upload_frame(obs);
-    const float* S = nullptr;
-    const SetupCache& setup = object_setup(0, camera, obs, loss, &S);
-    std::vector<LossValue>* outs[1] = {&out};
-    run(camera, f, {ObjectCall{&mesh, &poses, &setup, S, setup.box}}, with_gradient, outs);
-  }
-
   void evaluate_objects(const Camera& camera, const Observation& frame, const std::vector<ObjectBatch>& objects,
                         bool with_gradient, std::vector<std::vector<LossValue>>& out) override {
     const Drain drain(exec_);
+    const std::vector<Observation> views = object_observations(camera, frame, objects);  // checked before running
     out.assign(objects.size(), {});
-    std::vector<Observation> views(objects.size());
-    for (size_t k = 0; k < objects.size(); ++k) {  // everything is checked before anything runs
-      const ObjectBatch& b = objects[k];
-      if (!b.mesh) throw std::invalid_argument("evaluate_objects: object " + std::to_string(k) + " has no mesh");
-      Observation& o = views[k];
-      o.rgb = frame.rgb, o.depth = frame.depth, o.edges = frame.edges, o.mask = b.mask;
-      o.validate(camera);
-      check_loss(b.loss);
-      out[k].assign(b.poses.size(), LossValue());
-    }
+    for (size_t k = 0; k < objects.size(); ++k) out[k].assign(objects[k].poses.size(), LossValue());
     const FrameImages f = upload_frame(frame);
     std::vector<ObjectCall> calls;
     std::vector<std::vector<LossValue>*> outs;
@@ -166,10 +144,6 @@ class BatchedRenderer final : public Renderer {
     uint64_t used = 0;  // uses_ at the last call that used it
   };
   static constexpr size_t kMaxMeshes = 64;
-
-  static void check_loss(const LossOptions& loss) {
-    if (!(loss.depth_truncation > 0)) throw std::invalid_argument("loss: depth_truncation must be > 0");
-  }
 
   const MeshView& upload_mesh(const Mesh& mesh) {
     if (mesh.num_triangles() == 0 || mesh.neighbors().size() != mesh.triangles.size() || mesh.content_id() == 0)
@@ -423,7 +397,7 @@ class BatchedRenderer final : public Renderer {
   uint64_t uses_ = 0, call_start_ = 0;
   std::vector<Hypothesis> hyp_;
   std::vector<ObjectParams> object_params_;
-  std::deque<SetupCache> setups_;  // per object slot of evaluate_objects (evaluate(): slot 0); a deque, so
+  std::deque<SetupCache> setups_;  // per object slot of evaluate_objects; a deque, so
                                    // growing it keeps the references of the call in progress valid
   std::vector<uint64_t> mask_generation_;
   uint64_t depth_generation_ = 0;

@@ -63,8 +63,6 @@ class CpuRenderer final : public Renderer {
 
   std::vector<RenderImage> render(const Camera& camera, const Mesh& mesh, const std::vector<Pose>& poses,
                                   const cv::Mat& observed_mask) override;
-  void evaluate(const Camera& camera, const Mesh& mesh, const Observation& observed, const std::vector<Pose>& poses,
-                const LossOptions& loss, bool with_gradient, std::vector<LossValue>& out) override;
   /// All hypotheses of all objects share the threads (one parallel loop), so a frame with several objects keeps
   /// every core busy even when each object has only a few runs left.
   void evaluate_objects(const Camera& camera, const Observation& frame, const std::vector<ObjectBatch>& objects,
@@ -228,24 +226,11 @@ std::vector<RenderImage> CpuRenderer::render(const Camera& camera, const Mesh& m
   return out;
 }
 
-void CpuRenderer::evaluate(const Camera& camera, const Mesh& mesh, const Observation& obs,
-                           const std::vector<Pose>& poses, const LossOptions& loss, bool with_gradient,
-                           std::vector<LossValue>& out) {
-  obs.validate(camera);
-  if (!(loss.depth_truncation > 0)) throw std::invalid_argument("loss: depth_truncation must be > 0");
-  const CallContext ctx = make_context(camera, mesh, obs.mask, true, texture_views_);
-  const LossSetup setup = make_loss_setup(camera, obs, loss);
-  out.assign(poses.size(), LossValue());
-  pool_.parallel_for(static_cast<int>(poses.size()), [&](int h, int worker) {
-    evaluate_hypothesis(ctx, setup, obs, poses[h], with_gradient, workspaces_[worker], out[h]);
-  });
-}
-
 void CpuRenderer::evaluate_objects(const Camera& camera, const Observation& frame,
                                    const std::vector<ObjectBatch>& objects, bool with_gradient,
                                    std::vector<std::vector<LossValue>>& out) {
   const size_t n = objects.size();
-  std::vector<Observation> obs(n);
+  const std::vector<Observation> obs = object_observations(camera, frame, objects);
   std::vector<std::vector<TextureView>> views(n);
   std::vector<CallContext> ctx(n);
   std::vector<LossSetup> setups(n);
@@ -253,10 +238,6 @@ void CpuRenderer::evaluate_objects(const Camera& camera, const Observation& fram
   out.assign(n, {});
   for (size_t k = 0; k < n; ++k) {  // everything is checked before anything runs
     const ObjectBatch& b = objects[k];
-    if (!b.mesh) throw std::invalid_argument("evaluate_objects: object " + std::to_string(k) + " has no mesh");
-    obs[k].rgb = frame.rgb, obs[k].depth = frame.depth, obs[k].edges = frame.edges, obs[k].mask = b.mask;
-    obs[k].validate(camera);
-    if (!(b.loss.depth_truncation > 0)) throw std::invalid_argument("loss: depth_truncation must be > 0");
     ctx[k] = make_context(camera, *b.mesh, b.mask, true, views[k]);
     setups[k] = make_loss_setup(camera, obs[k], b.loss);
     out[k].assign(b.poses.size(), LossValue());

@@ -13,9 +13,10 @@ namespace diffdope {
 class RefineRun {
  public:
   /// Validates the input and prepares the scaled images, the loss and the learning rates. Throws
-  /// std::invalid_argument on unusable input (as Refiner::refine()).
+  /// std::invalid_argument on unusable input (as Refiner::refine()). `scaled_frame` (refine_all): the frame's
+  /// rgb / depth / edges already at the refiner's scale, shared by the objects; then only the mask is resized.
   RefineRun(const RefinerOptions& options, const Camera& camera, const Observation& observed, const Mesh& mesh,
-            const std::vector<Pose>& initials);
+            const std::vector<Pose>& initials, const Observation* scaled_frame = nullptr);
 
   bool done() const { return done_; }
   /// The poses to evaluate this iteration (the active runs).

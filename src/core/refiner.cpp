@@ -12,6 +12,7 @@
 #include <cmath>
 #include <limits>
 #include <memory>
+#include <optional>
 #include <opencv2/imgproc.hpp>
 #include <random>
 #include <stdexcept>
@@ -47,6 +48,22 @@ Refiner::Refiner(const RefinerOptions& options, std::unique_ptr<Renderer> render
 
 namespace {
 
+Camera scaled_camera(const Camera& camera, const RefinerOptions& o) {
+  return o.image_scale == 1.0 ? camera : camera.scaled(o.image_scale);
+}
+
+/// The frame's rgb / depth at the refiner's scale, with the paper's edge map when the loss uses it.
+Observation scale_frame(const Camera& camera, const Observation& frame, const RefinerOptions& o) {
+  Observation f;
+  f.rgb = frame.rgb;
+  f.depth = frame.depth;
+  f.edges = frame.edges;
+  f.validate(camera);
+  if (o.image_scale != 1.0) f = f.resized(scaled_camera(camera, o));
+  if (o.loss.weight_edges > 0 && f.has_rgb() && !f.has_edges()) f.edges = observed_edges(f.rgb);
+  return f;
+}
+
 cv::Mat window_mask(const Camera& cam, const Mesh& mesh, const Pose& pose, double grow) {
   const Eigen::AlignedBox2d b = cam.project_bounds(mesh.bbox_corners(pose), 1e-3);
   if (b.isEmpty()) return cv::Mat(cam.height, cam.width, CV_32F, cv::Scalar(1.0));
@@ -77,7 +94,7 @@ RefineResult Refiner::refine(const Camera& camera, const Observation& observed, 
 }
 
 RefineRun::RefineRun(const RefinerOptions& o, const Camera& camera, const Observation& observed, const Mesh& mesh,
-                     const std::vector<Pose>& initials)
+                     const std::vector<Pose>& initials, const Observation* scaled_frame)
     : options_(o), mesh_(mesh), start_time_(std::chrono::steady_clock::now()), initials_(initials) {
   observed.validate(camera);
   if (!observed.has_rgb() && !observed.has_depth())
@@ -94,8 +111,17 @@ RefineRun::RefineRun(const RefinerOptions& o, const Camera& camera, const Observ
   const Pose& initial = initials.front();
   const int starts = int(initials.size());
 
-  cam_ = o.image_scale == 1.0 ? camera : camera.scaled(o.image_scale);
-  obs_ = o.image_scale == 1.0 ? observed : observed.resized(cam_);
+  cam_ = scaled_camera(camera, o);
+  if (scaled_frame) {
+    Observation own;  // this object's mask; the frame's images are shared
+    own.mask = observed.mask;
+    obs_ = o.image_scale == 1.0 ? own : own.resized(cam_);
+    obs_.rgb = scaled_frame->rgb;
+    obs_.depth = scaled_frame->depth;
+    obs_.edges = scaled_frame->edges;
+  } else {
+    obs_ = o.image_scale == 1.0 ? observed : observed.resized(cam_);
+  }
   loss_ = o.loss;
   // The paper's edge term: Canny edges of the observed image, computed at the refiner's scale.
   if (loss_.weight_edges > 0 && obs_.has_rgb() && !obs_.has_edges()) obs_.edges = observed_edges(obs_.rgb);
@@ -231,6 +257,13 @@ std::vector<RefineResult> Refiner::refine_all(const Camera& camera, const Observ
                                               const std::vector<ObjectTarget>& objects) {
   std::vector<RefineResult> out(objects.size());
   std::vector<std::unique_ptr<RefineRun>> runs(objects.size());
+  // The frame is resized (and its edges found) once for all objects. A frame that does not fit the camera is
+  // reported by each object's own check below.
+  std::optional<Observation> shared_frame;
+  try {
+    shared_frame = scale_frame(camera, frame, options_);
+  } catch (const std::invalid_argument&) {
+  }
   const auto fail = [&](size_t k, const std::string& why) {
     out[k] = RefineResult();
     out[k].pose = out[k].initial_pose = objects[k].initial;
@@ -248,20 +281,21 @@ std::vector<RefineResult> Refiner::refine_all(const Camera& camera, const Observ
       if (!t.mask.empty()) o.mask = t.mask.type() == CV_32FC1 ? t.mask : to_mask_float(t.mask);
       std::vector<Pose> initials{t.initial};
       initials.insert(initials.end(), t.alternatives.begin(), t.alternatives.end());
-      runs[k] = std::make_unique<RefineRun>(options_, camera, o, *t.mesh, initials);
+      runs[k] = std::make_unique<RefineRun>(options_, camera, o, *t.mesh, initials,
+                                            shared_frame ? &*shared_frame : nullptr);
     } catch (const std::exception& e) {
       fail(k, e.what());
     }
   }
   // Lockstep: each iteration evaluates the active runs of every object in one renderer call (the CUDA backend
   // launches them together). The objects share the scaled rgb / depth / edges; each brings its own mask.
+  if (!shared_frame) return out;  // every object has failed its check
   std::vector<ObjectBatch> batches;
   std::vector<size_t> which;
   std::vector<std::vector<LossValue>> values;
   for (;;) {
     batches.clear();
     which.clear();
-    const Observation* shared = nullptr;
     bool with_gradient = false;
     for (size_t k = 0; k < runs.size(); ++k) {
       if (!runs[k] || runs[k]->done()) continue;
@@ -273,20 +307,19 @@ std::vector<RefineResult> Refiner::refine_all(const Camera& camera, const Observ
       b.poses = r.batch();
       batches.push_back(std::move(b));
       which.push_back(k);
-      if (!shared) shared = &r.observation();
       with_gradient = with_gradient || r.with_gradient();
     }
     if (batches.empty()) break;
     const Camera& cam = runs[which[0]]->camera();  // the same scaled camera for every object
     try {
-      renderer_->evaluate_objects(cam, *shared, batches, with_gradient, values);
+      renderer_->evaluate_objects(cam, *shared_frame, batches, with_gradient, values);
     } catch (const std::exception&) {
       // One object's input broke the joint call: evaluate them one by one so only that object fails.
       values.assign(which.size(), {});
       for (size_t j = 0; j < which.size(); ++j) {
         std::vector<std::vector<LossValue>> one;
         try {
-          renderer_->evaluate_objects(cam, *shared, {batches[j]}, with_gradient, one);
+          renderer_->evaluate_objects(cam, *shared_frame, {batches[j]}, with_gradient, one);
           values[j] = std::move(one[0]);
         } catch (const std::exception& e) {
           fail(which[j], e.what());
