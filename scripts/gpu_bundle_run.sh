@@ -17,7 +17,7 @@ if [[ -n "${FORCE_BUNDLED_GLIBC:-}" || "$(printf '%s\n%s\n' "$need" "${have:-0}"
 fi
 status=0
 nvidia-smi --query-gpu=name,driver_version,memory.total,compute_cap --format=csv 2>&1 | tee "$out/device.txt"
-echo "== CUDA tests (and the emulated pipeline) =="
+echo "== CUDA tests (and the CPU executor) =="
 "${run[@]}" "$here/bin/diffdope_cuda_tests" 2>&1 | tee "$out/tests.log"
 [[ ${PIPESTATUS[0]} -eq 0 ]] || status=1
 no_device=0

@@ -17,14 +17,9 @@ struct CudaDeviceInfo {
 /// Probes the CUDA runtime once per process (~10 ms without a GPU) and caches the answer.
 CudaDeviceInfo cuda_device_info();
 
-/// The CUDA backend (same maths as the CPU backend: include/diffdope/kernels/). Throws std::runtime_error with
+/// The CUDA backend: the same render pipeline and stages as the CPU backend, launched as CUDA kernels. Throws std::runtime_error with
 /// the reason when it is not built or no device is present.
 std::unique_ptr<Renderer> make_cuda_renderer(const RenderOptions& options = {});
-
-/// The CUDA backend's pipeline (src/core/batched_renderer.hpp: the same stages, packed buffers, z-buffer keys,
-/// blend slots and per-hypothesis reductions) executed on CPU threads instead of a GPU. For testing that
-/// pipeline where no GPU is present; slower than the CPU backend. name() is "cuda-emulated".
-std::unique_ptr<Renderer> make_emulated_cuda_renderer(const RenderOptions& options = {});
 
 /// Renderer for `device`. "auto" falls back to the CPU when CUDA is unavailable and says so in `note` (one
 /// line; empty when nothing needs saying). "cuda" without a device throws std::runtime_error naming the

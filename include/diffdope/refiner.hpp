@@ -106,7 +106,7 @@ class Refiner {
   /// With a renderer of the caller's choosing (options.device is then not used).
   Refiner(const RefinerOptions& options, std::unique_ptr<Renderer> renderer);
   const RefinerOptions& options() const { return options_; }
-  /// The backend in use ("cpu", "cuda", or "cuda-emulated").
+  /// The backend in use ("cpu" or "cuda").
   std::string backend() const { return renderer_->name(); }
 
   /// Refines one object. `observed` holds the full-resolution images (any of rgb / depth / mask may be

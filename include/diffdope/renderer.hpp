@@ -1,6 +1,7 @@
 #pragma once
-// The differentiable renderer: a backend interface (CPU now, CUDA later) that renders B hypotheses (poses) of
-// one mesh and evaluates the loss against an observation, with its gradient w.r.t. each pose's 6-D update.
+// The differentiable renderer: renders B hypotheses (poses) of one or several meshes and evaluates the loss
+// against an observation, with its gradient w.r.t. each pose's 6-D update. One pipeline
+// (src/core/render_pipeline.hpp) with two executors: CPU threads (make_cpu_renderer) and CUDA (device.hpp).
 #include <memory>
 #include <opencv2/core.hpp>
 #include <string>
@@ -26,7 +27,7 @@ struct RenderOptions {
   int roi_margin = 2;
   /// false: work on the full frame (results are identical; for tests and debugging).
   bool use_roi = true;
-  /// Worker threads (CPU backend); 0 = all hardware threads.
+  /// Worker threads (CPU executor); 0 = all hardware threads.
   int threads = 0;
 };
 
@@ -113,7 +114,7 @@ class Renderer {
   std::vector<std::vector<LossValue>> one_result_;
 };
 
-/// The multithreaded CPU backend.
+/// The render pipeline on CPU threads (each hypothesis' stages back to back on one thread).
 std::unique_ptr<Renderer> make_cpu_renderer(const RenderOptions& options = {});
 
 }  // namespace diffdope

@@ -206,11 +206,14 @@ TEST(Refiner, RefinesEveryObjectOfAFrameAndReportsBadOnes) {
   EXPECT_FALSE(res[2].error.empty());
   EXPECT_FALSE(res[2].plausible);
 
-  // Lockstep (all objects' runs in one renderer call per iteration) gives what each object alone gives: on
-  // the CPU backend (one evaluate per object) and on the batched pipeline (one call for all objects).
-  for (const bool batched : {false, true}) {
-    SCOPED_TRACE(batched ? "cuda-emulated" : "cpu");
-    const auto make = [&] { return batched ? make_emulated_cuda_renderer() : make_cpu_renderer(); };
+  // Lockstep (all objects' runs in one renderer call per iteration) gives what each object alone gives, with
+  // regions of interest on two threads and on the full frame on one thread.
+  for (const bool full_frame : {false, true}) {
+    SCOPED_TRACE(full_frame ? "full frame, 1 thread" : "regions of interest");
+    RenderOptions ro;
+    ro.use_roi = !full_frame;
+    ro.threads = full_frame ? 1 : 2;
+    const auto make = [&] { return make_cpu_renderer(ro); };
     Refiner together(test_options(), make());
     // An object whose mesh the renderer refuses (not finalized) fails alone; the others are still refined.
     Mesh raw;
@@ -231,7 +234,7 @@ TEST(Refiner, RefinesEveryObjectOfAFrameAndReportsBadOnes) {
       EXPECT_EQ(all[k].loss.total, alone.loss.total) << "object " << k;
       EXPECT_EQ(all[k].winner, alone.winner);
       EXPECT_EQ(all[k].mask_iou, alone.mask_iou);
-      EXPECT_LT((all[k].pose.t - res[k].pose.t).norm(), 1e-4);  // batched pipeline vs CPU backend
+      EXPECT_LT((all[k].pose.t - res[k].pose.t).norm(), 1e-4);  // vs the default renderer
     }
   }
 }

@@ -86,6 +86,27 @@ DD_HOST_DEVICE void raster_edges_at(const TriangleRaster& r, int x, int y, long 
   for (int k = 0; k < 3; ++k) e[k] = r.orient * edge_function_fixed(r.f[k], r.f[(k + 1) % 3], x * kOne, y * kOne);
 }
 
+/// Narrows the row's pixels [*lo, *hi] (e: the edge functions at x = *lo) to the span the triangle's half-planes
+/// can cover, by exact integer division, and moves e to the new *lo: wide triangles then skip the pixels left
+/// and right of them. The per-pixel test still decides coverage (ties on an edge). False when nothing is left.
+DD_HOST_DEVICE bool raster_row_span(const TriangleRaster& r, int xs, long long e[3], int* lo, int* hi) {
+  if (*hi - *lo <= 8) return true;  // not worth three divisions
+  for (int k = 0; k < 3; ++k) {
+    if (r.dx[k] > 0 && e[k] < 0) {
+      const long long first = xs + (-e[k] + r.dx[k] - 1) / r.dx[k];
+      if (first > *lo) *lo = first > *hi ? *hi + 1 : static_cast<int>(first);
+    } else if (r.dx[k] < 0 && e[k] >= 0) {
+      const long long last = xs + e[k] / -r.dx[k];
+      if (last < *hi) *hi = static_cast<int>(last);
+    } else if (r.dx[k] < 0 && e[k] < 0) {
+      *hi = xs - 1;
+    }
+  }
+  if (*lo > *hi) return false;
+  for (int k = 0; k < 3; ++k) e[k] += r.dx[k] * (*lo - xs);
+  return true;
+}
+
 DD_HOST_DEVICE bool raster_inside(const TriangleRaster& r, const long long e[3]) {
   bool inside = true;
   for (int k = 0; k < 3; ++k) inside &= e[k] > 0 || (e[k] == 0 && r.top_left[k]);

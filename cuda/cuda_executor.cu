@@ -1,13 +1,13 @@
-// CUDA backend of the differentiable renderer: the executor of the batched renderer (src/core/batched_renderer.hpp)
-// on a GPU. Each stage of src/core/batched_stages.hpp (thin functors around the DD_HOST_DEVICE maths of
-// include/diffdope/kernels/) is one kernel launch over every hypothesis of every object of a call
-// (grid.y = hypothesis); meshes and textures are uploaded once per mesh, observed images once per frame (pinned
-// staging), all on one stream; one small download per call brings back the loss sums and gradients.
+// The CUDA executor of the render pipeline (src/core/render_pipeline.hpp): each stage of
+// src/core/render_stages.hpp (thin functors around the DD_HOST_DEVICE maths of include/diffdope/kernels/) is one
+// kernel launch over every hypothesis of every object of a call (grid.y = hypothesis); meshes and textures are
+// uploaded once per mesh, observed images once per frame (pinned staging), all on one stream; one small download
+// per call brings back the loss sums and gradients.
 //
-// Differences from the CPU backend: float summation order (per-pixel sums are reduced in parallel, a warp sum
-// then a double atomic per warp, in no fixed order) and the device's libm (log2f of the mip level may differ by
-// an ulp). Compiled with --fmad=false, so single arithmetic operations round as on the CPU. The same pipeline runs on CPU threads in CI (src/core/emulated_renderer.cpp); the
-// equivalence tests are test/unit/test_cuda_backend.cpp.
+// Differences from the CPU executor (src/core/host_executor.cpp, the same stages on host threads): float
+// summation order (per-pixel sums are reduced in parallel, a warp sum then a double atomic per warp, in no fixed
+// order) and the device's libm (log2f of the mip level may differ by an ulp). Compiled with --fmad=false, so
+// single arithmetic operations round as on the CPU. Equivalence tests: test/unit/test_executors.cpp.
 #include <cuda_runtime.h>
 
 #include <cstring>
@@ -16,7 +16,7 @@
 #include <string>
 #include <vector>
 
-#include "../src/core/batched_renderer.hpp"
+#include "../src/core/render_pipeline.hpp"
 #include "diffdope/device.hpp"
 
 namespace diffdope {
@@ -132,17 +132,10 @@ class CudaExec {
     if (n) check(cudaMemcpyAsync(host, src, sizeof(T) * n, cudaMemcpyDeviceToHost, stream_), "download");
   }
   void zero(double* p, size_t n) { check(cudaMemsetAsync(p, 0, sizeof(double) * n, stream_), "memset"); }
-  template <class Stage>
-  void for_each(int n, int B, const Stage& stage) {
-    if (n <= 0 || B <= 0) return;
-    for_each_kernel<<<dim3(blocks(n), B), kThreads, 0, stream_>>>(stage, n);
-    check(cudaGetLastError(), "kernel launch");
-  }
-  template <class Stage>
-  void reduce(int n, int B, const Stage& stage, double* out, int stride) {
-    if (n <= 0 || B <= 0) return;
-    reduce_kernel<<<dim3(blocks(n), B), kThreads, 0, stream_>>>(stage, n, out, stride);
-    check(cudaGetLastError(), "kernel launch");
+  static constexpr bool kSplitsTriangles = true;  // big triangles in bands of rows: more threads
+  template <class... Steps>
+  void run(int B, const Steps&... steps) {
+    if (B > 0) (launch(steps, B), ...);
   }
   void synchronize(const char* what) { check(cudaStreamSynchronize(stream_), what); }
   void drain() {
@@ -169,6 +162,19 @@ class CudaExec {
   std::vector<std::unique_ptr<DeviceImage>> images_;
   double* results_ = nullptr;
   size_t results_size_ = 0;
+
+  template <class Stage>
+  void launch(const pipeline::Each<Stage>& s, int B) {
+    if (s.n <= 0) return;
+    for_each_kernel<<<dim3(blocks(s.n), B), kThreads, 0, stream_>>>(s.stage, s.n);
+    check(cudaGetLastError(), "kernel launch");
+  }
+  template <class Stage>
+  void launch(const pipeline::Sum<Stage>& s, int B) {
+    if (s.n <= 0) return;
+    reduce_kernel<<<dim3(blocks(s.n), B), kThreads, 0, stream_>>>(s.stage, s.n, s.out, s.stride);
+    check(cudaGetLastError(), "kernel launch");
+  }
 };
 
 }  // namespace
@@ -202,7 +208,7 @@ CudaDeviceInfo cuda_probe_device() {
   }
   // A device older than the compiled architectures has no kernel image for them: not usable.
   cudaFuncAttributes attr{};
-  const cudaError_t k = cudaFuncGetAttributes(&attr, for_each_kernel<batched::VertexStage>);
+  const cudaError_t k = cudaFuncGetAttributes(&attr, for_each_kernel<pipeline::VertexStage>);
   if (k != cudaSuccess) {
     info.reason = info.name + " cannot run this build's kernels (" + cudaGetErrorString(k) +
                   "; rebuild with diffdope_ros_CUDA_ARCHITECTURES including it)";
@@ -214,7 +220,7 @@ CudaDeviceInfo cuda_probe_device() {
 }
 
 std::unique_ptr<Renderer> cuda_make_renderer(const RenderOptions& options) {
-  return std::make_unique<batched::BatchedRenderer<CudaExec>>(options);
+  return std::make_unique<pipeline::PipelineRenderer<CudaExec>>(options);
 }
 
 }  // namespace diffdope

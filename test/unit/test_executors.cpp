@@ -1,7 +1,7 @@
-// The CUDA backend's batched pipeline against the CPU backend (renders, losses, gradients, refined poses, several
-// objects in one call) and against finite differences, plus device selection. Each test runs twice: on the
-// emulated executor (the same stages on CPU threads: runs everywhere, so CI checks the pipeline) and on a CUDA
-// device, which without one is reported as SKIPPED with the reason.
+// The render pipeline's executors. Every TEST_P runs on the CPU executor (here and in CI) and on a CUDA device
+// (SKIPPED with the reason without one), against a reference: the CPU executor on the full frame (no region of
+// interest) with one thread and a fresh renderer (no cached uploads or loss constants). So each comparison checks
+// the regions of interest, the packing, thread independence and the caches on the CPU, and the device on a GPU.
 #include <gtest/gtest.h>
 
 #include "diffdope/device.hpp"
@@ -14,8 +14,8 @@ using namespace diffdope::test;
 
 namespace {
 
-/// Parameter: "cuda-emulated" or "cuda".
-class BatchedBackend : public ::testing::TestWithParam<std::string> {
+/// Parameter: "cpu" or "cuda".
+class Executor : public ::testing::TestWithParam<std::string> {
  protected:
   void SetUp() override {
     if (GetParam() == "cuda") {
@@ -24,9 +24,17 @@ class BatchedBackend : public ::testing::TestWithParam<std::string> {
     }
   }
   std::unique_ptr<Renderer> make(const RenderOptions& o = {}) const {
-    return GetParam() == "cuda" ? make_cuda_renderer(o) : make_emulated_cuda_renderer(o);
+    return GetParam() == "cuda" ? make_cuda_renderer(o) : make_cpu_renderer(o);
   }
 };
+
+/// The reference: full frame, one thread.
+std::unique_ptr<Renderer> make_reference() {
+  RenderOptions o;
+  o.use_roi = false;
+  o.threads = 1;
+  return make_cpu_renderer(o);
+}
 
 struct Case {
   const char* name;
@@ -78,9 +86,9 @@ TEST(DeviceSelection, AutoFallsBackCudaFailsClearly) {
   EXPECT_THROW(bad.validate(), std::invalid_argument);
 }
 
-TEST_P(BatchedBackend, RendersLikeTheCpu) {
+TEST_P(Executor, RendersLikeTheReference) {
   const Camera cam = test_camera();
-  auto cpu = make_cpu_renderer();
+  auto cpu = make_reference();
   auto gpu = make();
   for (const Case& c : cases()) {
     const auto a = cpu->render(cam, c.mesh, {c.truth, c.test});
@@ -94,9 +102,9 @@ TEST_P(BatchedBackend, RendersLikeTheCpu) {
   }
 }
 
-TEST_P(BatchedBackend, LossesAndGradientsMatchTheCpu) {
+TEST_P(Executor, LossesAndGradientsMatchTheReference) {
   const Camera cam = test_camera();
-  auto cpu = make_cpu_renderer();
+  auto cpu = make_reference();
   auto gpu = make();
   for (const Case& c : cases()) {
     const Observation obs = observe(*cpu, cam, c.mesh, c.truth);
@@ -121,7 +129,7 @@ TEST_P(BatchedBackend, LossesAndGradientsMatchTheCpu) {
   }
 }
 
-TEST_P(BatchedBackend, GradientMatchesFiniteDifferences) {
+TEST_P(Executor, GradientMatchesFiniteDifferences) {
   const Camera cam = test_camera();
   auto gpu = make();
   for (const Case& c : cases()) {
@@ -134,7 +142,7 @@ TEST_P(BatchedBackend, GradientMatchesFiniteDifferences) {
   }
 }
 
-TEST_P(BatchedBackend, RefinesLikeTheCpu) {
+TEST_P(Executor, RefinesLikeTheReference) {
   const Camera cam(420, 420, 159.5, 119.5, 320, 240);
   const Mesh mesh = make_l_block(0.12, make_label_texture(256, 31));
   const Pose truth = look_pose(0.7, -0.4, 0.3, 0.01, -0.01, 0.55);
@@ -146,7 +154,7 @@ TEST_P(BatchedBackend, RefinesLikeTheCpu) {
   o.batch_size = 16;
   o.iterations = 40;
   o.image_scale = 1.0;
-  const RefineResult a = Refiner(o).refine(cam, obs, mesh, init);
+  const RefineResult a = Refiner(o, make_reference()).refine(cam, obs, mesh, init);
   Refiner gpu_refiner(o, make(o.render));
   EXPECT_EQ(gpu_refiner.backend(), GetParam());
   const RefineResult b = gpu_refiner.refine(cam, obs, mesh, init);
@@ -155,9 +163,9 @@ TEST_P(BatchedBackend, RefinesLikeTheCpu) {
   EXPECT_NEAR(a.loss.total, b.loss.total, 1e-3 * a.loss.total);
 }
 
-TEST_P(BatchedBackend, EdgeTermMatchesTheCpu) {
+TEST_P(Executor, EdgeTermMatchesTheReference) {
   const Camera cam = test_camera();
-  auto cpu = make_cpu_renderer();
+  auto cpu = make_reference();
   auto gpu = make();
   LossOptions loss;
   loss.weight_edges = 1.0;
@@ -176,9 +184,9 @@ TEST_P(BatchedBackend, EdgeTermMatchesTheCpu) {
 
 // Several objects in one call (each with its own mask, loss options and poses; invalid and empty batches too)
 // give what one call per object gives.
-TEST_P(BatchedBackend, SeveralObjectsInOneCallMatchOneByOne) {
+TEST_P(Executor, SeveralObjectsInOneCallMatchOneByOne) {
   const Camera cam = test_camera();
-  auto cpu = make_cpu_renderer();
+  auto cpu = make_reference();
   auto gpu = make();
   const std::vector<Case> cs = cases();
   Observation frame = observe(*cpu, cam, cs[0].mesh, cs[0].truth);
@@ -211,7 +219,7 @@ TEST_P(BatchedBackend, SeveralObjectsInOneCallMatchOneByOne) {
         EXPECT_FALSE(std::isfinite(together[k][h].total));
         continue;
       }
-      // The same sums in the same order on the emulation; atomics may add them in another order on a device.
+      // The same sums in the same order on the CPU; atomics may add them in another order on a device.
       const double tol = GetParam() == "cuda" ? 1e-9 : 0.0;
       EXPECT_NEAR(together[k][h].total, alone[h].total, tol * std::max(1.0, alone[h].total));
       EXPECT_LE((together[k][h].gradient - alone[h].gradient).norm(), 1e-6 * alone[h].gradient.norm());
@@ -223,11 +231,11 @@ TEST_P(BatchedBackend, SeveralObjectsInOneCallMatchOneByOne) {
   }
 }
 
-// The CPU backend's evaluate_objects (one parallel loop over every hypothesis of every object) gives exactly what
+// The CPU executor's evaluate_objects (one parallel loop over every hypothesis of every object) gives exactly what
 // evaluate gives per object.
-TEST(CpuBackend, SeveralObjectsInOneCallAreEvaluatedAsOneByOne) {
+TEST(CpuExecutor, SeveralObjectsInOneCallAreEvaluatedAsOneByOne) {
   const Camera cam = test_camera();
-  auto cpu = make_cpu_renderer();
+  auto cpu = make_reference();
   const std::vector<Case> cs = cases();
   Observation frame = observe(*cpu, cam, cs[1].mesh, cs[1].truth);
   std::vector<ObjectBatch> objects(cs.size());
@@ -254,8 +262,8 @@ TEST(CpuBackend, SeveralObjectsInOneCallAreEvaluatedAsOneByOne) {
   EXPECT_THROW(cpu->evaluate_objects(cam, frame, objects, true, together), std::invalid_argument);
 }
 
-// The emulated executor honours RenderOptions::threads, with the same results on 1 and 2 threads.
-TEST(CudaEmulated, OneThreadGivesWhatTwoGive) {
+// The CPU executor honours RenderOptions::threads, with the same results on 1 and 2 threads.
+TEST(CpuExecutor, OneThreadGivesWhatTwoGive) {
   const Camera cam = test_camera();
   const Case c = cases()[2];
   const Observation obs = observe(*make_cpu_renderer(), cam, c.mesh, c.truth);
@@ -264,15 +272,15 @@ TEST(CudaEmulated, OneThreadGivesWhatTwoGive) {
   two.threads = 2;
   std::vector<LossValue> a, b;
   const std::vector<Pose> poses = {c.test, c.truth, c.test, c.truth};
-  make_emulated_cuda_renderer(one)->evaluate(cam, c.mesh, obs, poses, LossOptions(), true, a);
-  make_emulated_cuda_renderer(two)->evaluate(cam, c.mesh, obs, poses, LossOptions(), true, b);
+  make_cpu_renderer(one)->evaluate(cam, c.mesh, obs, poses, LossOptions(), true, a);
+  make_cpu_renderer(two)->evaluate(cam, c.mesh, obs, poses, LossOptions(), true, b);
   for (size_t h = 0; h < poses.size(); ++h) {
     EXPECT_EQ(a[h].total, b[h].total);
     EXPECT_EQ(a[h].gradient, b[h].gradient);
   }
 }
 
-TEST_P(BatchedBackend, BadInputIsRefusedClearly) {
+TEST_P(Executor, BadInputIsRefusedClearly) {
   const Camera cam = test_camera();
   auto gpu = make();
   const Case c = cases()[0];
@@ -283,7 +291,7 @@ TEST_P(BatchedBackend, BadInputIsRefusedClearly) {
   ASSERT_EQ(v.size(), 2u);
   EXPECT_TRUE(std::isinf(v[0].total));
   std::vector<LossValue> ref;
-  make_cpu_renderer()->evaluate(cam, c.mesh, obs, {c.truth}, LossOptions(), true, ref);
+  make_reference()->evaluate(cam, c.mesh, obs, {c.truth}, LossOptions(), true, ref);
   EXPECT_NEAR(v[1].total, ref[0].total, 1e-5);
   Mesh empty;
   EXPECT_THROW(gpu->evaluate(cam, empty, obs, {c.truth}, LossOptions(), true, v), std::invalid_argument);
@@ -294,9 +302,9 @@ TEST_P(BatchedBackend, BadInputIsRefusedClearly) {
 
 // Images and loss constants are kept between calls while the inputs stay the same: a change written into the
 // same buffers (mask, depth, rgb), other loss options or a dropped mask must all be seen.
-TEST_P(BatchedBackend, SeesEveryChangeOfItsInputs) {
+TEST_P(Executor, SeesEveryChangeOfItsInputs) {
   const Camera cam = test_camera();
-  auto cpu = make_cpu_renderer();
+  auto cpu = make_reference();
   auto gpu = make();
   const Case c = cases()[1];
   Observation obs = observe(*cpu, cam, c.mesh, c.truth);
@@ -324,9 +332,9 @@ TEST_P(BatchedBackend, SeesEveryChangeOfItsInputs) {
 }
 
 // A mesh whose texture changed in place (same address, same vertices) is uploaded again once re-finalized.
-TEST_P(BatchedBackend, ReFinalizedMeshIsUploadedAgain) {
+TEST_P(Executor, ReFinalizedMeshIsUploadedAgain) {
   const Camera cam = test_camera();
-  auto cpu = make_cpu_renderer();
+  auto cpu = make_reference();
   auto gpu = make();
   Case c = cases()[0];
   const Observation obs = observe(*cpu, cam, c.mesh, c.truth);
@@ -342,10 +350,10 @@ TEST_P(BatchedBackend, ReFinalizedMeshIsUploadedAgain) {
 
 // More meshes than the upload cache keeps (64): the least recently used are dropped and uploaded again when
 // they come back, with the same results; a call with many objects keeps all of its own.
-TEST_P(BatchedBackend, ManyMeshesComeAndGo) {
+TEST_P(Executor, ManyMeshesComeAndGo) {
   const Camera cam(200, 200, 39.5, 29.5, 80, 60);
   auto gpu = make();
-  auto cpu = make_cpu_renderer();
+  auto cpu = make_reference();
   std::vector<Mesh> meshes;
   for (int k = 0; k < 70; ++k) meshes.push_back(make_box(Eigen::Vector3d(0.05 + 0.001 * k, 0.04, 0.06), make_pattern_texture(16, k)));
   const Pose pose = look_pose(0.3, 0.2, 0.1, 0.0, 0.0, 0.5);
@@ -365,14 +373,14 @@ TEST_P(BatchedBackend, ManyMeshesComeAndGo) {
     cpu->evaluate(cam, meshes[k], obs, {pose}, LossOptions(), true, ref);
     gpu->evaluate(cam, meshes[k], obs, {pose}, LossOptions(), true, one);
     EXPECT_NEAR(alone[k], ref[0].total, 1e-5) << k;
-    // Bit for bit on the emulation; device atomics add in no fixed order.
+    // Bit for bit on the CPU; device atomics add in no fixed order.
     const double tol = GetParam() == "cuda" ? 1e-9 * std::max(1.0, alone[k]) : 0.0;
     EXPECT_NEAR(together[k][0].total, alone[k], tol) << k;
     EXPECT_NEAR(one[0].total, alone[k], tol) << k;
   }
 }
 
-INSTANTIATE_TEST_SUITE_P(Executors, BatchedBackend, ::testing::Values("cuda-emulated", "cuda"),
+INSTANTIATE_TEST_SUITE_P(Executors, Executor, ::testing::Values("cpu", "cuda"),
                          [](const ::testing::TestParamInfo<std::string>& i) {
-                           return i.param == "cuda" ? std::string("Cuda") : std::string("CudaEmulated");
+                           return i.param == "cuda" ? std::string("Cuda") : std::string("Cpu");
                          });

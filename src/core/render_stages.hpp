@@ -1,9 +1,9 @@
 #pragma once
-// The stages of the batched renderer (internal header): one DD_HOST_DEVICE functor per stage, called for every
-// (element i, hypothesis h) of a call. The CUDA backend (cuda/cuda_renderer.cu) launches each as one kernel
-// over all hypotheses of all objects; the emulated executor (src/core/emulated_renderer.cpp) runs the very same
-// functors on CPU threads, so CI checks this pipeline (packing, z-buffer keys, event slots, reductions) against
-// the CPU backend without a GPU. The maths inside each stage is include/diffdope/kernels/.
+// The stages of the render pipeline (internal header): one DD_HOST_DEVICE functor per stage, called for every
+// (element i, hypothesis h) of a call; count(h) is how many elements hypothesis h has. The pipeline
+// (render_pipeline.hpp) hands them to an executor: the CPU one (src/core/host_executor.cpp) runs all stages of
+// one hypothesis back to back on one thread, the CUDA one (cuda/cuda_executor.cu) launches each stage as one
+// kernel over all hypotheses of all objects. The maths inside each stage is include/diffdope/kernels/.
 //
 // Layout: hypothesis h has a region of interest of w * h pixels stored row by row from `offset` in the packed
 // pixel buffers, its projected vertices from `vertex_offset` and triangles from `triangle_offset`. Every write
@@ -19,7 +19,22 @@
 #include "diffdope/kernels/vertex_stage.hpp"
 
 namespace diffdope {
-namespace batched {
+namespace pipeline {
+
+/// A step of an executor's run(): stage(i, h) for every hypothesis h and i < min(n, stage.count(h)).
+template <class Stage>
+struct Each {
+  Stage stage;
+  int n;  // most elements of any hypothesis (a GPU's grid size); 0 = skip the step
+};
+/// A reducing step: out[stride * h + k] += sum over i of stage(i, h, v)[k], k < Stage::kValues.
+template <class Stage>
+struct Sum {
+  Stage stage;
+  int n;
+  double* out;
+  int stride;
+};
 
 /// One object of a call: its mesh on the executor and, when evaluating, its loss constants and mask.
 struct ObjectParams {
@@ -95,7 +110,9 @@ DD_HOST_DEVICE ProjectedView projected(const Pipeline& p, const Hypothesis& hy) 
 
 /// i: vertex.
 struct VertexStage {
+  static constexpr const char* kName = "vertices";
   Pipeline p;
+  DD_HOST_DEVICE int count(int h) const { return p.objects[p.H[h].object].nv; }
   DD_HOST_DEVICE void operator()(int i, int h) const {
     const Hypothesis& hy = p.H[h];
     const ObjectParams& o = p.objects[hy.object];
@@ -106,7 +123,9 @@ struct VertexStage {
 
 /// i: triangle. Screen area (0: culled / clipped) and mip level.
 struct TriangleStage {
+  static constexpr const char* kName = "triangles";
   Pipeline p;
+  DD_HOST_DEVICE int count(int h) const { return p.objects[p.H[h].object].nt; }
   DD_HOST_DEVICE void operator()(int t, int h) const {
     const Hypothesis& hy = p.H[h];
     const ObjectParams& o = p.objects[hy.object];
@@ -123,7 +142,9 @@ struct TriangleStage {
 
 /// i: pixel of the region.
 struct ClearStage {
+  static constexpr const char* kName = "clear";
   Pipeline p;
+  DD_HOST_DEVICE int count(int h) const { return p.H[h].w * p.H[h].h; }
   DD_HOST_DEVICE void operator()(int i, int h) const {
     const Hypothesis& hy = p.H[h];
     if (i < hy.w * hy.h) p.key[hy.offset + i] = kEmptyKey;
@@ -136,8 +157,10 @@ struct ClearStage {
 /// not depend on the order, so splitting big triangles into bands of rows (work for more threads) changes
 /// nothing in the result.
 struct RasterStage {
+  static constexpr const char* kName = "raster";
   Pipeline p;
   int bands;
+  DD_HOST_DEVICE int count(int h) const { return p.objects[p.H[h].object].nt * bands; }
   DD_HOST_DEVICE void operator()(int i, int h) const {
     const int t = i / bands, band = i % bands;
     const Hypothesis& hy = p.H[h];
@@ -160,7 +183,9 @@ struct RasterStage {
     for (int y = ys; y <= ye; ++y) {
       long long e[3];
       raster_edges_at(R, xs, y, e);
-      for (int x = xs; x <= xe; ++x, e[0] += R.dx[0], e[1] += R.dx[1], e[2] += R.dx[2]) {
+      int lo = xs, hi = xe;
+      if (!raster_row_span(R, xs, e, &lo, &hi)) continue;
+      for (int x = lo; x <= hi; ++x, e[0] += R.dx[0], e[1] += R.dx[1], e[2] += R.dx[2]) {
         if (!raster_inside(R, e)) continue;
         const float zp = raster_depth(R, e);
         if (!(zp < INFINITY)) continue;  // as the CPU's zp < +inf test
@@ -173,7 +198,9 @@ struct RasterStage {
 
 /// i: pixel. Visible triangle and shading (barycentrics kept for the backward pass); post starts as pre.
 struct ShadeStage {
+  static constexpr const char* kName = "shade";
   Pipeline p;
+  DD_HOST_DEVICE int count(int h) const { return p.H[h].w * p.H[h].h; }
   DD_HOST_DEVICE void operator()(int i, int h) const {
     const Hypothesis& hy = p.H[h];
     if (i >= hy.w * hy.h) return;
@@ -197,7 +224,9 @@ struct ShadeStage {
 /// i: pixel. The discontinuity between the pixel and its right (dir 0) / lower (dir 1) neighbour, if any, into
 /// slot 2 * pixel + dir; `to` is a packed-buffer index.
 struct BlendDetectStage {
+  static constexpr const char* kName = "blend detect";
   Pipeline p;
+  DD_HOST_DEVICE int count(int h) const { return p.H[h].w * p.H[h].h; }
   DD_HOST_DEVICE void operator()(int i, int h) const {
     const Hypothesis& hy = p.H[h];
     if (i >= hy.w * hy.h) return;
@@ -236,7 +265,9 @@ DD_HOST_DEVICE int event_slots(const Hypothesis& hy, int i, int q, int slots[4])
 
 /// i: pixel. Applies the blends that reach it.
 struct BlendApplyStage {
+  static constexpr const char* kName = "blend apply";
   Pipeline p;
+  DD_HOST_DEVICE int count(int h) const { return p.H[h].w * p.H[h].h; }
   DD_HOST_DEVICE void operator()(int i, int h) const {
     const Hypothesis& hy = p.H[h];
     if (i >= hy.w * hy.h) return;
@@ -252,7 +283,9 @@ struct BlendApplyStage {
 
 /// i: pixel; reduced per hypothesis into (rgb, depth, mask). Also dL/d(post) when with_gradient.
 struct LossStage {
+  static constexpr const char* kName = "loss";
   Pipeline p;
+  DD_HOST_DEVICE int count(int h) const { return p.H[h].w * p.H[h].h; }
   static constexpr int kValues = 3;
   DD_HOST_DEVICE void operator()(int i, int h, double* v) const {
     const Hypothesis& hy = p.H[h];
@@ -274,7 +307,9 @@ struct LossStage {
 
 /// Edge term, stage 1, i: pixel. The render's grey image (mean of the blended colour).
 struct GreyStage {
+  static constexpr const char* kName = "edges grey";
   Pipeline p;
+  DD_HOST_DEVICE int count(int h) const { return p.H[h].w * p.H[h].h; }
   DD_HOST_DEVICE void operator()(int i, int h) const {
     const Hypothesis& hy = p.H[h];
     if (i >= hy.w * hy.h) return;
@@ -286,7 +321,9 @@ struct GreyStage {
 /// Edge term, stage 2, i: pixel; reduced per hypothesis. |observed edges - rendered Sobel edges| over S, and
 /// dL/d(Sobel responses) when with_gradient.
 struct EdgeStage {
+  static constexpr const char* kName = "edges sobel";
   Pipeline p;
+  DD_HOST_DEVICE int count(int h) const { return p.H[h].w * p.H[h].h; }
   static constexpr int kValues = 1;
   DD_HOST_DEVICE void operator()(int i, int h, double* v) const {
     const Hypothesis& hy = p.H[h];
@@ -302,7 +339,9 @@ struct EdgeStage {
 
 /// Edge term, stage 3, i: pixel. Gathers the Sobel gradients into the pixel's colour gradient.
 struct EdgeGatherStage {
+  static constexpr const char* kName = "edges gather";
   Pipeline p;
+  DD_HOST_DEVICE int count(int h) const { return p.H[h].w * p.H[h].h; }
   DD_HOST_DEVICE void operator()(int i, int h) const {
     const Hypothesis& hy = p.H[h];
     if (i >= hy.w * hy.h || !hy.valid || p.objects[hy.object].k_edges == 0.f) return;
@@ -314,7 +353,9 @@ struct EdgeGatherStage {
 /// Backward, i: pixel; reduced per hypothesis into the 6-D pose gradient. The blends that reached the pixel
 /// (into its pre-blend gradient and the silhouette gradient), then its shading.
 struct BackwardStage {
+  static constexpr const char* kName = "backward";
   Pipeline p;
+  DD_HOST_DEVICE int count(int h) const { return p.H[h].w * p.H[h].h; }
   static constexpr int kValues = 6;
   DD_HOST_DEVICE void operator()(int i, int h, double* g6) const {
     const Hypothesis& hy = p.H[h];
@@ -335,5 +376,5 @@ struct BackwardStage {
   }
 };
 
-}  // namespace batched
+}  // namespace pipeline
 }  // namespace diffdope

@@ -1,15 +1,20 @@
 #pragma once
-// The batched renderer (internal header): every hypothesis of every object of a call goes through each stage
-// of src/core/batched_stages.hpp in one launch. `Exec` says where the stages run:
-//   - CudaExec (cuda/cuda_renderer.cu): device buffers, one stream, one kernel per stage, pinned staging;
-//   - EmulatedExec (src/core/emulated_renderer.cpp): host memory, the same functors on CPU threads.
+// The render pipeline (internal header), written once for every executor: packing of all hypotheses of all
+// objects of a call, regions of interest, the mesh cache, loss constants, results. The stages themselves are
+// src/core/render_stages.hpp. `Exec` says where they run:
+//   - HostExec (src/core/host_executor.cpp, the "cpu" backend): host memory; each hypothesis runs every stage
+//     back to back on one thread (its buffers stay in cache), the hypotheses of all objects spread over the cores;
+//   - CudaExec (cuda/cuda_executor.cu): device buffers, one stream, one kernel per stage, pinned staging.
 // Exec provides:
 //   template <class T> Buffer        grow-only storage: T* reserve(size_t n); T* ptr
 //   upload(Buffer<T>&, const T*, n)  copy in (asynchronous: the host data must live until synchronize())
 //   download(T* host, const T*, n)   copy out (asynchronous)
 //   zero(double*, n)
-//   for_each(n, B, stage)            stage(i, h) for i < n, h < B
-//   reduce(n, B, stage, out, stride) out[stride * h + k] += sum over i of stage(i, h, v)[k], k < Stage::kValues
+//   run(B, steps...)                 the steps in order, each for every hypothesis h < B:
+//                                    Each{stage, n}: stage(i, h) for i < min(n, stage.count(h));
+//                                    Sum{stage, n, out, stride}: out[stride * h + k] += sum over those i of
+//                                    stage(i, h, v)[k], k < Stage::kValues. A step with n = 0 is skipped.
+//   kSplitsTriangles                 whether big triangles are cut into bands of rows (more threads on a GPU)
 //   synchronize(what)                waits for the queued work; throws naming `what` on an error
 //   drain()                          waits for the queued work, ignoring errors (after a failed call)
 //   image(slot, mat, &changed)       an observed CV_32F image on the executor, re-uploaded (changed = true)
@@ -28,11 +33,12 @@
 #include <memory>
 #include <stdexcept>
 #include <string>
+#include <tuple>
 #include <type_traits>
 #include <utility>
 #include <vector>
 
-#include "batched_stages.hpp"
+#include "render_stages.hpp"
 #include "diffdope/observation.hpp"
 #include "diffdope/renderer.hpp"
 #include "loss_setup.hpp"
@@ -40,14 +46,16 @@
 #include "render_image.hpp"
 
 namespace diffdope {
-namespace batched {
+namespace pipeline {
 
 template <class Exec>
-class BatchedRenderer final : public Renderer {
+class PipelineRenderer final : public Renderer {
  public:
   template <class... Args>
-  explicit BatchedRenderer(const RenderOptions& options, Args&&... args)
+  explicit PipelineRenderer(const RenderOptions& options, Args&&... args)
       : Renderer(options), exec_(std::forward<Args>(args)...) {}
+  PipelineRenderer(const PipelineRenderer&) = delete;
+  PipelineRenderer& operator=(const PipelineRenderer&) = delete;
   std::string name() const override { return exec_.name(); }
 
   std::vector<RenderImage> render(const Camera& camera, const Mesh& mesh, const std::vector<Pose>& poses,
@@ -58,7 +66,8 @@ class BatchedRenderer final : public Renderer {
     if (poses.empty()) return {};
     const Drain drain(exec_);
     const PixelRect box = mask_box(observed_mask, camera.width, camera.height, false);
-    const Call c = forward(camera, {ObjectCall{&mesh, &poses, nullptr, nullptr, box}}, false);
+    const Call c = prepare(camera, {ObjectCall{&mesh, &poses, nullptr, nullptr, box}}, false);
+    std::apply([&](const auto&... steps) { exec_.run(c.B, steps...); }, forward_steps(c));
     const size_t N = size_t(c.pixels);
     std::vector<PixelAttr> pre(N), post(N);
     std::vector<int> tri(N);
@@ -208,10 +217,10 @@ class BatchedRenderer final : public Renderer {
     }
   }
 
-  /// Forward stages (vertices .. blends) for every hypothesis of every object; fills hyp_ and the buffers.
+  /// Packs every hypothesis of every object (hyp_, regions, offsets) and sizes the buffers for the stages.
   /// Evaluating (a loss setup per object): S = 1 without a mask and a non-rotation pose gets no work and an
-  /// infinite loss; rendering: only non-finite poses are skipped, as the CPU backend does.
-  Call forward(const Camera& camera, const std::vector<ObjectCall>& objects, bool evaluating) {
+  /// infinite loss; rendering: only non-finite poses are skipped.
+  Call prepare(const Camera& camera, const std::vector<ObjectCall>& objects, bool evaluating) {
     camera.validate();
     call_start_ = uses_ + 1;  // meshes used from here on belong to this call
     Call c{};
@@ -224,7 +233,7 @@ class BatchedRenderer final : public Renderer {
     object_params_.resize(objects.size());
     size_t B = 0;
     for (const ObjectCall& o : objects) B += o.poses->size();
-    if (B > 65535) throw std::invalid_argument("batched renderer: too many hypotheses in one call");
+    if (B > 65535) throw std::invalid_argument("renderer: too many hypotheses in one call");
     hyp_.resize(B);
     int64_t pixels = 0, vertices = 0, triangles = 0;
     c.max_pixels = 1;
@@ -257,7 +266,7 @@ class BatchedRenderer final : public Renderer {
         triangles += op.nt;
         // Indices (and the 2 * pixel event slots) are ints on the device.
         if (pixels > INT_MAX / 2 || vertices > INT_MAX || triangles > INT_MAX)
-          throw std::invalid_argument("batched renderer: too many pixels or vertices in one call (" +
+          throw std::invalid_argument("renderer: too many pixels or vertices in one call (" +
                                       std::to_string(B) + " hypotheses); use smaller batches, images or a mask");
         c.max_pixels = std::max(c.max_pixels, hy.w * hy.h);
       }
@@ -291,19 +300,23 @@ class BatchedRenderer final : public Renderer {
     exec_.upload(d_objects_, object_params_.data(), object_params_.size());
     p.objects = d_objects_.ptr;
 
-    exec_.for_each(c.max_vertices, c.B, VertexStage{p});
-    exec_.for_each(c.max_triangles, c.B, TriangleStage{p});
-    exec_.for_each(c.max_pixels, c.B, ClearStage{p});
-    // Bands of rows per triangle, so a few big triangles (a box seen close up) still spread over many threads:
-    // about 4 rows per thread for a triangle of average size (projected area ~ 2 * region / triangles).
-    const double mean_rows = std::sqrt(2.0 * c.max_pixels / std::max(1, c.max_triangles));
-    const int bands = std::max(
-        1, std::min({64, int(std::ceil(mean_rows / 4.0)), (INT_MAX - 1024) / std::max(1, c.max_triangles)}));
-    exec_.for_each(c.max_triangles * bands, c.B, RasterStage{p, bands});
-    exec_.for_each(c.max_pixels, c.B, ShadeStage{p});
-    exec_.for_each(c.max_pixels, c.B, BlendDetectStage{p});
-    exec_.for_each(c.max_pixels, c.B, BlendApplyStage{p});
     return c;
+  }
+
+  /// The forward stages (vertices .. blends) of a prepared call.
+  auto forward_steps(const Call& c) const {
+    const Pipeline& p = c.p;
+    // On a GPU, bands of rows per triangle, so a few big triangles (a box seen close up) still spread over many
+    // threads: about 4 rows per thread for a triangle of average size (projected area ~ 2 * region / triangles).
+    int bands = 1;
+    if (Exec::kSplitsTriangles) {
+      const double mean_rows = std::sqrt(2.0 * c.max_pixels / std::max(1, c.max_triangles));
+      bands = std::max(1, std::min({64, int(std::ceil(mean_rows / 4.0)), (INT_MAX - 1024) / std::max(1, c.max_triangles)}));
+    }
+    return std::make_tuple(Each<VertexStage>{{p}, c.max_vertices}, Each<TriangleStage>{{p}, c.max_triangles},
+                           Each<ClearStage>{{p}, c.max_pixels}, Each<RasterStage>{{p, bands}, c.max_triangles * bands},
+                           Each<ShadeStage>{{p}, c.max_pixels}, Each<BlendDetectStage>{{p}, c.max_pixels},
+                           Each<BlendApplyStage>{{p}, c.max_pixels});
   }
 
   /// The frame's images on the executor (uploaded when they changed); a new depth image invalidates the loss
@@ -351,7 +364,7 @@ class BatchedRenderer final : public Renderer {
   /// Forward, loss and (with_gradient) backward for the objects; outs[k] receives object k's values.
   void run(const Camera& camera, const FrameImages& frame, const std::vector<ObjectCall>& objects,
            bool with_gradient, std::vector<LossValue>* const* outs) {
-    Call c = forward(camera, objects, true);
+    Call c = prepare(camera, objects, true);
     Pipeline& p = c.p;
     p.I = frame.I;
     p.D = frame.D;
@@ -363,15 +376,19 @@ class BatchedRenderer final : public Renderer {
     out_.reserve(10 * B);
     exec_.zero(out_.ptr, 10 * B);
     if (with_gradient) p.g_post = g_post_.reserve(N);
-    exec_.reduce(c.max_pixels, c.B, LossStage{p}, out_.ptr, 4);
-    if (edges) {  // the edge term, as the CPU backend computes it, after the per-pixel terms
+    if (edges) {  // the edge term, after the per-pixel terms
       p.grey = grey_.reserve(N);
       if (with_gradient) p.g_sx = g_sx_.reserve(N), p.g_sy = g_sy_.reserve(N);
-      exec_.for_each(c.max_pixels, c.B, GreyStage{p});
-      exec_.reduce(c.max_pixels, c.B, EdgeStage{p}, out_.ptr + 3, 4);
-      if (with_gradient) exec_.for_each(c.max_pixels, c.B, EdgeGatherStage{p});
     }
-    if (with_gradient) exec_.reduce(c.max_pixels, c.B, BackwardStage{p}, out_.ptr + 4 * B, 6);
+    const int n = c.max_pixels, n_edges = edges ? n : 0, n_grad = with_gradient ? n : 0;
+    // Every stage of the call in one run: on the CPU each hypothesis goes through all of them on one thread.
+    std::apply(
+        [&](const auto&... forward) {
+          exec_.run(c.B, forward..., Sum<LossStage>{{p}, n, out_.ptr, 4}, Each<GreyStage>{{p}, n_edges},
+                    Sum<EdgeStage>{{p}, n_edges, out_.ptr + 3, 4}, Each<EdgeGatherStage>{{p}, n_edges && n_grad ? n : 0},
+                    Sum<BackwardStage>{{p}, n_grad, out_.ptr + 4 * B, 6});
+        },
+        forward_steps(c));
     double* host = exec_.results(10 * B);
     exec_.download(host, out_.ptr, 10 * B);
     exec_.synchronize("evaluate");
@@ -415,5 +432,5 @@ class BatchedRenderer final : public Renderer {
   typename Exec::template Buffer<double> out_;
 };
 
-}  // namespace batched
+}  // namespace pipeline
 }  // namespace diffdope
