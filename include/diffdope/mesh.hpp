@@ -32,6 +32,25 @@ struct MeshLoadOptions {
   Eigen::Vector3f default_color{0.7f, 0.7f, 0.7f};
 };
 
+/// A simplified version of a mesh's surface over the mesh's textures: fewer triangles, and only the vertices they
+/// use (corners equal in position, UV and colour merged). Mesh::finalize() builds a chain of them with
+/// meshoptimizer (UV seams and borders kept) for dense meshes; the renderer draws the coarsest one whose error
+/// projects below RenderOptions::lod_pixel_error, since triangles far smaller than a pixel cost time and show
+/// nothing.
+struct MeshLod {
+  double error = 0;            // metres: meshoptimizer's estimate of the largest deviation from the full surface
+  std::vector<Vec3f> positions, colors;
+  std::vector<Vec2f> uvs;      // empty when the mesh has none
+  std::vector<int> triangles;  // 3 vertex indices (into this level's vertices) per triangle
+  std::vector<int> tri_texture;
+  std::vector<int> neighbors, opposite;  // as Mesh::neighbors() / opposite_vertices(), for these triangles
+  std::vector<unsigned char> seams;
+  std::vector<float> tri_uv_area;
+  bool closed_outward = false;
+  int num_triangles() const { return static_cast<int>(triangles.size() / 3); }
+  int num_vertices() const { return static_cast<int>(positions.size()); }
+};
+
 class Mesh {
  public:
   std::vector<Vec3f> positions;  // metres, model frame
@@ -79,10 +98,20 @@ class Mesh {
   uint64_t content_id() const { return content_id_; }
 
   /// Kernel view over host memory; valid while this mesh and `texture_storage` live and are not modified.
-  MeshView view(std::vector<TextureView>& texture_storage) const;
+  /// `lod` > 0: the triangles of lods()[lod - 1] over the same vertices and textures.
+  MeshView view(std::vector<TextureView>& texture_storage, int lod = 0) const;
+
+  /// Simplified surfaces, each about half the triangles of the one before and with a larger error (empty for
+  /// meshes of at most kLodMinTriangles triangles). A triangle soup's first level is the whole surface over
+  /// merged vertices (error 0). Built by finalize().
+  const std::vector<MeshLod>& lods() const { return lods_; }
+  static constexpr int kLodMinTriangles = 1024;
+  /// Closed and outward (see closed_and_outward()) for level `lod` (0 = the full mesh).
+  bool closed_and_outward(int lod) const { return lod == 0 ? closed_outward_ : lods_[lod - 1].closed_outward; }
 
  private:
   void build_adjacency();
+  void build_lods();
   void build_mipmaps();
   Eigen::Vector3d bbox_min_ = Eigen::Vector3d::Zero(), bbox_max_ = Eigen::Vector3d::Zero();
   double diameter_ = 0;
@@ -91,6 +120,7 @@ class Mesh {
   std::vector<float> tri_uv_area_;
   bool closed_outward_ = false;
   uint64_t content_id_ = 0;
+  std::vector<MeshLod> lods_;
 };
 
 /// Writes an ASCII PLY (BOP layout: positions times `units_per_metre`, e.g. 1000 for millimetres; texture_u/v and

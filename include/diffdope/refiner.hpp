@@ -32,6 +32,13 @@ struct RefinerOptions {
   bool lr_log_uniform = false;  // draw log-uniformly (the paper's "exponent" variant) instead of uniformly
   double lr_decay = 0.1;        // rate multiplier reached at the last iteration (paper: 0.1)
   double image_scale = 0.5;     // images and intrinsics are resized by this before refining (paper: 0.5)
+  /// Coarse to fine: the first coarse_fraction of the iterations run on images resized by
+  /// image_scale * coarse_scale (at 0.5, a quarter of the pixels), the rest at image_scale; the best pose of
+  /// each run is then sought among the fine iterations only. coarse_fraction 0 = every iteration at image_scale
+  /// (the paper's algorithm). The coarse phase is where the large moves of a hard start happen; the fine phase
+  /// polishes.
+  double coarse_fraction = 0.5;  // in [0, 1)
+  double coarse_scale = 0.5;     // in (0, 1]
   LossOptions loss;             // term weights (all 1 as in the paper) and robustness constants
   uint64_t seed = 0;            // learning-rate draws; same seed, same inputs -> same result
   /// Stop when no run has improved its best loss by more than early_stop_tolerance (relative) for
@@ -74,10 +81,10 @@ struct RefineResult {
   Pose pose;                          // refined model pose in the camera frame (metres)
   Pose initial_pose;                  // the initial pose the winning run started from
   LossValue loss;                     // winner's final loss, per term (unweighted means) and total
-  double initial_loss = 0;            // loss of the initial pose
-  std::vector<double> run_losses;     // best loss of every run
+  double initial_loss = 0;            // loss of the initial pose (at image_scale)
+  std::vector<double> run_losses;     // best loss of every run (at image_scale; +inf for runs dropped in the coarse phase)
   std::vector<double> learning_rates; // every run's drawn rate
-  std::vector<double> history;        // winner's loss at every iteration
+  std::vector<double> history;        // winner's loss at every iteration (the coarse phase's at its own scale)
   std::vector<std::vector<double>> run_histories;  // every run's loss at every iteration it ran
   int winner = -1;
   int start = 0;                      // index of the initial pose the winning run started from

@@ -27,6 +27,9 @@ struct RenderOptions {
   int roi_margin = 2;
   /// false: work on the full frame (results are identical; for tests and debugging).
   bool use_roi = true;
+  /// Level of detail: draw a mesh's coarsest simplified surface (Mesh::lods()) whose error, projected at the
+  /// object's nearest point, is at most this many pixels of the rendered image. 0 = always the full mesh.
+  double lod_pixel_error = 0.25;
   /// Worker threads (CPU executor); 0 = all hardware threads.
   int threads = 0;
 };
@@ -66,7 +69,8 @@ struct RenderImage {
   cv::Mat color;      // CV_32FC3 RGB, premultiplied by coverage (i.e. over black)
   cv::Mat depth;      // CV_32FC1 metres, camera z of the visible surface; 0 where not covered
   cv::Mat coverage;   // CV_32FC1 in [0, 1], antialiased at silhouettes
-  cv::Mat triangle;   // CV_32SC1 visible triangle index, -1 where not covered
+  cv::Mat triangle;   // CV_32SC1 visible triangle index (of the level drawn), -1 where not covered
+  int lod = 0;        // level of detail drawn: 0 the full mesh, k Mesh::lods()[k - 1] (RenderOptions::lod_pixel_error)
 };
 
 /// One object of Renderer::evaluate_objects(): its mesh, its own observed mask and loss options, its hypotheses.

@@ -8,6 +8,8 @@
 #include <opencv2/imgproc.hpp>
 #include <unordered_map>
 
+#include <meshoptimizer.h>
+
 namespace diffdope {
 namespace {
 
@@ -46,70 +48,13 @@ double compute_diameter(const std::vector<Vec3f>& pts) {
   return std::sqrt(best);
 }
 
-}  // namespace
-
-void Mesh::finalize() {
-  const std::string who = "mesh '" + name + "': ";
-  if (positions.empty() || triangles.size() < 3) throw std::runtime_error(who + "has no triangles");
-  if (triangles.size() % 3 != 0) throw std::runtime_error(who + "triangle index count is not a multiple of 3");
-  const int nv = num_vertices(), nt = num_triangles();
-  for (int idx : triangles)
-    if (idx < 0 || idx >= nv) throw std::runtime_error(who + "triangle index " + std::to_string(idx) + " out of range");
-  for (const Vec3f& p : positions)
-    if (!std::isfinite(p.x) || !std::isfinite(p.y) || !std::isfinite(p.z))
-      throw std::runtime_error(who + "vertex position is not finite");
-  if (!uvs.empty() && static_cast<int>(uvs.size()) != nv) throw std::runtime_error(who + "uv count != vertex count");
-  if (colors.empty()) colors.assign(nv, Vec3f{0.7f, 0.7f, 0.7f});
-  if (static_cast<int>(colors.size()) != nv) throw std::runtime_error(who + "colour count != vertex count");
-  if (tri_texture.empty()) tri_texture.assign(nt, -1);
-  if (static_cast<int>(tri_texture.size()) != nt) throw std::runtime_error(who + "tri_texture count != triangle count");
-  for (int& t : tri_texture) {
-    if (t >= static_cast<int>(textures.size())) throw std::runtime_error(who + "texture index out of range");
-    if (uvs.empty()) t = -1;
-  }
-  for (const Texture& t : textures)
-    if (t.width <= 0 || t.height <= 0 || t.rgb.size() != static_cast<size_t>(3 * t.width * t.height))
-      throw std::runtime_error(who + "texture '" + t.source + "' is empty or inconsistent");
-
-  bbox_min_ = bbox_max_ = to_eigen(positions[0]);
-  for (const Vec3f& p : positions) {
-    bbox_min_ = bbox_min_.cwiseMin(to_eigen(p));
-    bbox_max_ = bbox_max_.cwiseMax(to_eigen(p));
-  }
-  diameter_ = compute_diameter(positions);
-  build_adjacency();
-  build_mipmaps();
-  static std::atomic<uint64_t> next_id{1};  // renderers key their uploads on it (an address can be reused)
-  content_id_ = next_id++;
-}
-
-void Mesh::build_mipmaps() {
-  for (Texture& t : textures) {
-    t.mips.clear();
-    cv::Mat prev(t.height, t.width, CV_32FC3, t.rgb.data());
-    while ((prev.cols > 1 || prev.rows > 1) && int(t.mips.size()) + 1 < kMaxTextureLevels) {
-      cv::Mat next;
-      cv::resize(prev, next, cv::Size(std::max(1, prev.cols / 2), std::max(1, prev.rows / 2)), 0, 0, cv::INTER_AREA);
-      TextureImage img;
-      img.width = next.cols;
-      img.height = next.rows;
-      img.rgb.assign(next.ptr<float>(0), next.ptr<float>(0) + 3 * next.cols * next.rows);
-      t.mips.push_back(std::move(img));
-      prev = cv::Mat(t.mips.back().height, t.mips.back().width, CV_32FC3, t.mips.back().rgb.data());
-    }
-  }
-  tri_uv_area_.assign(num_triangles(), 0.f);
-  if (uvs.empty()) return;
-  for (int t = 0; t < num_triangles(); ++t) {
-    const Vec2f a = uvs[triangles[3 * t]], b = uvs[triangles[3 * t + 1]], c = uvs[triangles[3 * t + 2]];
-    tri_uv_area_[t] = 0.5f * std::fabs((b.x - a.x) * (c.y - a.y) - (b.y - a.y) * (c.x - a.x));
-  }
-}
-
-void Mesh::build_adjacency() {
-  const int nt = num_triangles();
+/// Edge adjacency, colour seams and closedness of `triangles` (with their texture indices) over the mesh's vertices.
+void surface_topology(const std::vector<Vec3f>& positions, const std::vector<Vec2f>& uvs,
+                      const std::vector<Vec3f>& colors, const std::vector<int>& triangles,
+                      const std::vector<int>& tri_texture, double eps, std::vector<int>& neighbors_,
+                      std::vector<int>& opposite_, std::vector<unsigned char>& seams_, bool& closed_outward_) {
+  const int nt = static_cast<int>(triangles.size() / 3);
   // Weld by position: seams duplicate vertices (same position, different UVs) and must not become borders.
-  const double eps = std::max(1e-9, 1e-6 * (bbox_max_ - bbox_min_).norm());
   struct KeyHash {
     size_t operator()(const std::array<long long, 3>& k) const {
       return std::hash<long long>()(k[0] * 73856093LL ^ k[1] * 19349663LL ^ k[2] * 83492791LL);
@@ -191,6 +136,160 @@ void Mesh::build_adjacency() {
   closed_outward_ = closed && volume > 0;
 }
 
+
+/// Area in UV units of each triangle (0 without UVs): the texture's mip level follows texels per pixel.
+std::vector<float> uv_areas(const std::vector<Vec2f>& uvs, const std::vector<int>& triangles) {
+  std::vector<float> area(triangles.size() / 3, 0.f);
+  if (uvs.empty()) return area;
+  for (size_t t = 0; t < area.size(); ++t) {
+    const Vec2f a = uvs[triangles[3 * t]], b = uvs[triangles[3 * t + 1]], c = uvs[triangles[3 * t + 2]];
+    area[t] = 0.5f * std::fabs((b.x - a.x) * (c.y - a.y) - (b.y - a.y) * (c.x - a.x));
+  }
+  return area;
+}
+
+double weld_epsilon(const Eigen::Vector3d& lo, const Eigen::Vector3d& hi) { return std::max(1e-9, 1e-6 * (hi - lo).norm()); }
+
+}  // namespace
+
+void Mesh::finalize() {
+  const std::string who = "mesh '" + name + "': ";
+  if (positions.empty() || triangles.size() < 3) throw std::runtime_error(who + "has no triangles");
+  if (triangles.size() % 3 != 0) throw std::runtime_error(who + "triangle index count is not a multiple of 3");
+  const int nv = num_vertices(), nt = num_triangles();
+  for (int idx : triangles)
+    if (idx < 0 || idx >= nv) throw std::runtime_error(who + "triangle index " + std::to_string(idx) + " out of range");
+  for (const Vec3f& p : positions)
+    if (!std::isfinite(p.x) || !std::isfinite(p.y) || !std::isfinite(p.z))
+      throw std::runtime_error(who + "vertex position is not finite");
+  if (!uvs.empty() && static_cast<int>(uvs.size()) != nv) throw std::runtime_error(who + "uv count != vertex count");
+  if (colors.empty()) colors.assign(nv, Vec3f{0.7f, 0.7f, 0.7f});
+  if (static_cast<int>(colors.size()) != nv) throw std::runtime_error(who + "colour count != vertex count");
+  if (tri_texture.empty()) tri_texture.assign(nt, -1);
+  if (static_cast<int>(tri_texture.size()) != nt) throw std::runtime_error(who + "tri_texture count != triangle count");
+  for (int& t : tri_texture) {
+    if (t >= static_cast<int>(textures.size())) throw std::runtime_error(who + "texture index out of range");
+    if (uvs.empty()) t = -1;
+  }
+  for (const Texture& t : textures)
+    if (t.width <= 0 || t.height <= 0 || t.rgb.size() != static_cast<size_t>(3 * t.width * t.height))
+      throw std::runtime_error(who + "texture '" + t.source + "' is empty or inconsistent");
+
+  bbox_min_ = bbox_max_ = to_eigen(positions[0]);
+  for (const Vec3f& p : positions) {
+    bbox_min_ = bbox_min_.cwiseMin(to_eigen(p));
+    bbox_max_ = bbox_max_.cwiseMax(to_eigen(p));
+  }
+  diameter_ = compute_diameter(positions);
+  build_adjacency();
+  build_mipmaps();
+  build_lods();
+  static std::atomic<uint64_t> next_id{1};  // renderers key their uploads on it (an address can be reused)
+  content_id_ = next_id++;
+}
+
+void Mesh::build_mipmaps() {
+  for (Texture& t : textures) {
+    t.mips.clear();
+    cv::Mat prev(t.height, t.width, CV_32FC3, t.rgb.data());
+    while ((prev.cols > 1 || prev.rows > 1) && int(t.mips.size()) + 1 < kMaxTextureLevels) {
+      cv::Mat next;
+      cv::resize(prev, next, cv::Size(std::max(1, prev.cols / 2), std::max(1, prev.rows / 2)), 0, 0, cv::INTER_AREA);
+      TextureImage img;
+      img.width = next.cols;
+      img.height = next.rows;
+      img.rgb.assign(next.ptr<float>(0), next.ptr<float>(0) + 3 * next.cols * next.rows);
+      t.mips.push_back(std::move(img));
+      prev = cv::Mat(t.mips.back().height, t.mips.back().width, CV_32FC3, t.mips.back().rgb.data());
+    }
+  }
+  tri_uv_area_ = uv_areas(uvs, triangles);
+}
+
+void Mesh::build_adjacency() {
+  surface_topology(positions, uvs, colors, triangles, tri_texture, weld_epsilon(bbox_min_, bbox_max_), neighbors_,
+                   opposite_, seams_, closed_outward_);
+}
+
+void Mesh::build_lods() {
+  lods_.clear();
+  if (num_triangles() <= kLodMinTriangles) return;
+  // meshoptimizer keeps vertices shared by triangles of different textures apart by simplifying each texture's
+  // triangles on their own, with their outline locked (colour seams between textures stay where they are).
+  // Meshes are often stored as triangle soups (3 vertices per triangle, as many PLY exporters write them):
+  // corners with the same position, UV and colour are one vertex for the simplifier, else every vertex would
+  // look like a seam and stay locked. Each triangle then refers to one representative of its corners.
+  struct Corner {
+    Vec3f p;
+    Vec2f uv;
+    Vec3f c;
+  };
+  std::vector<Corner> corners(positions.size());
+  for (size_t i = 0; i < positions.size(); ++i)
+    corners[i] = Corner{positions[i], uvs.empty() ? Vec2f{0.f, 0.f} : uvs[i], colors[i]};
+  // The simplifier sees only these unique vertices (an unused duplicate would make its twin look like a seam).
+  std::vector<unsigned> remap(positions.size());
+  const size_t unique = meshopt_generateVertexRemap(remap.data(), nullptr, positions.size(), corners.data(),
+                                                    corners.size(), sizeof(Corner));
+  std::vector<unsigned> representative(unique, ~0u);
+  std::vector<Vec3f> unique_positions(unique);
+  for (size_t i = 0; i < positions.size(); ++i)
+    if (representative[remap[i]] == ~0u) representative[remap[i]] = unsigned(i), unique_positions[remap[i]] = positions[i];
+  std::vector<unsigned> all(triangles.size());
+  for (size_t i = 0; i < triangles.size(); ++i) all[i] = remap[size_t(triangles[i])];
+  const float scale = meshopt_simplifyScale(&unique_positions[0].x, unique, sizeof(Vec3f));
+  // Each level is simplified from the full mesh (so its error is measured against the full surface), to half
+  // the triangles of the level before, down to about kLodMinTriangles / 4 triangles.
+  std::vector<int> texture_ids(tri_texture);
+  std::sort(texture_ids.begin(), texture_ids.end());
+  texture_ids.erase(std::unique(texture_ids.begin(), texture_ids.end()), texture_ids.end());
+  std::vector<std::vector<unsigned>> groups(texture_ids.size());  // each texture's triangles
+  for (size_t t = 0; t < tri_texture.size(); ++t) {
+    const size_t g = std::lower_bound(texture_ids.begin(), texture_ids.end(), tri_texture[t]) - texture_ids.begin();
+    groups[g].insert(groups[g].end(), &all[3 * t], &all[3 * t] + 3);
+  }
+  const unsigned options = texture_ids.size() > 1 ? meshopt_SimplifyLockBorder : 0;
+  std::vector<unsigned> next(all.size());
+  size_t previous = all.size() / 3;
+  // A triangle soup first gets a level of all its triangles over the merged vertices (error 0, fewer vertices
+  // to transform).
+  const bool soup = unique * 4 < positions.size() * 3;
+  for (size_t divisor = soup ? 1 : 2; previous > size_t(kLodMinTriangles) / 4; divisor *= 2) {
+    MeshLod lod;
+    float error = 0;
+    for (size_t g = 0; g < groups.size(); ++g) {
+      float e = 0;
+      const size_t n = divisor == 1 ? groups[g].size()
+                                    : meshopt_simplify(next.data(), groups[g].data(), groups[g].size(),
+                                                       &unique_positions[0].x, unique, sizeof(Vec3f),
+                                                       groups[g].size() / divisor / 3 * 3, 0.05f, options, &e);
+      if (divisor == 1) std::copy(groups[g].begin(), groups[g].end(), next.begin());
+      error = std::max(error, e);
+      for (size_t i = 0; i < n; ++i) lod.triangles.push_back(int(representative[next[i]]));
+      lod.tri_texture.insert(lod.tri_texture.end(), n / 3, texture_ids[g]);
+    }
+    const size_t count = size_t(lod.num_triangles());
+    if (count == 0 || (divisor > 1 && count > previous * 3 / 4)) break;  // stuck (topology, error cap)
+    previous = count;
+    lod.error = double(error) * scale;
+    // Only the vertices this level uses, in the order its triangles first use them (cache locality).
+    std::vector<int> index(positions.size(), -1);
+    for (int& v : lod.triangles) {
+      if (index[size_t(v)] < 0) {
+        index[size_t(v)] = lod.num_vertices();
+        lod.positions.push_back(positions[size_t(v)]);
+        lod.colors.push_back(colors[size_t(v)]);
+        if (!uvs.empty()) lod.uvs.push_back(uvs[size_t(v)]);
+      }
+      v = index[size_t(v)];
+    }
+    surface_topology(lod.positions, lod.uvs, lod.colors, lod.triangles, lod.tri_texture,
+                     weld_epsilon(bbox_min_, bbox_max_), lod.neighbors, lod.opposite, lod.seams, lod.closed_outward);
+    lod.tri_uv_area = uv_areas(lod.uvs, lod.triangles);
+    lods_.push_back(std::move(lod));
+  }
+}
+
 std::vector<Eigen::Vector3d> Mesh::bbox_corners() const {
   std::vector<Eigen::Vector3d> c;
   for (int i = 0; i < 8; ++i)
@@ -205,7 +304,7 @@ std::vector<Eigen::Vector3d> Mesh::bbox_corners(const Pose& pose) const {
   return c;
 }
 
-MeshView Mesh::view(std::vector<TextureView>& storage) const {
+MeshView Mesh::view(std::vector<TextureView>& storage, int lod) const {
   storage.clear();
   for (const Texture& t : textures) {
     TextureView tv{};
@@ -228,6 +327,20 @@ MeshView Mesh::view(std::vector<TextureView>& storage) const {
   v.num_vertices = num_vertices();
   v.num_triangles = num_triangles();
   v.num_textures = static_cast<int>(storage.size());
+  if (lod > 0) {
+    const MeshLod& l = lods_.at(size_t(lod - 1));
+    v.positions = l.positions.data();
+    v.colors = l.colors.data();
+    v.uvs = l.uvs.empty() ? nullptr : l.uvs.data();
+    v.num_vertices = l.num_vertices();
+    v.triangles = l.triangles.data();
+    v.tri_texture = l.tri_texture.data();
+    v.neighbors = l.neighbors.data();
+    v.opposite = l.opposite.data();
+    v.seams = l.seams.data();
+    v.tri_uv_area = l.tri_uv_area.data();
+    v.num_triangles = l.num_triangles();
+  }
   return v;
 }
 

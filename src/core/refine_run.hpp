@@ -15,8 +15,10 @@ class RefineRun {
   /// Validates the input and prepares the scaled images, the loss and the learning rates. Throws
   /// std::invalid_argument on unusable input (as Refiner::refine()). `scaled_frame` (refine_all): the frame's
   /// rgb / depth / edges already at the refiner's scale, shared by the objects; then only the mask is resized.
+  /// `coarse_frame` likewise at image_scale * coarse_scale (see RefinerOptions::coarse_fraction).
   RefineRun(const RefinerOptions& options, const Camera& camera, const Observation& observed, const Mesh& mesh,
-            const std::vector<Pose>& initials, const Observation* scaled_frame = nullptr);
+            const std::vector<Pose>& initials, const Observation* scaled_frame = nullptr,
+            const Observation* coarse_frame = nullptr);
 
   bool done() const { return done_; }
   /// The poses to evaluate this iteration (the active runs).
@@ -28,8 +30,10 @@ class RefineRun {
   /// Winner and quality scores (renders the refined pose once).
   RefineResult finish(Renderer& renderer);
 
-  const Camera& camera() const { return cam_; }
-  const Observation& observation() const { return obs_; }
+  /// The camera and images of this iteration (coarse, then fine).
+  const Camera& camera() const { return coarse() ? coarse_.cam : fine_.cam; }
+  const Observation& observation() const { return coarse() ? coarse_.obs : fine_.obs; }
+  bool coarse() const { return k_ < switch_at_; }
   const LossOptions& loss() const { return loss_; }
   const Mesh& mesh() const { return mesh_; }
 
@@ -38,8 +42,12 @@ class RefineRun {
   const Mesh& mesh_;
   std::chrono::steady_clock::time_point start_time_;
   std::vector<Pose> initials_;
-  Camera cam_;
-  Observation obs_;
+  struct Level {
+    Camera cam;
+    Observation obs;
+  };
+  Level fine_, coarse_;
+  int switch_at_ = 0;  // first iteration at the fine scale (0: no coarse phase)
   LossOptions loss_;
   bool has_mask_ = false;
   double diameter_ = 1.0;
@@ -48,6 +56,7 @@ class RefineRun {
   std::vector<LossValue> best_;
   std::vector<int> active_;  // runs still descending (successive halving drops the worst)
   int k_ = 0, stale_ = 0;
+  int steps_ = 0;  // iterations stepped (k_ jumps when the coarse phase stalls)
   double best_overall_;
   bool done_ = false;
 };

@@ -48,18 +48,21 @@ Refiner::Refiner(const RefinerOptions& options, std::unique_ptr<Renderer> render
 
 namespace {
 
-Camera scaled_camera(const Camera& camera, const RefinerOptions& o) {
-  return o.image_scale == 1.0 ? camera : camera.scaled(o.image_scale);
+Camera scaled_camera(const Camera& camera, double scale) { return scale == 1.0 ? camera : camera.scaled(scale); }
+
+/// Iterations run at the coarse scale (RefinerOptions::coarse_fraction).
+int coarse_iterations(const RefinerOptions& o) {
+  return o.coarse_scale < 1.0 ? int(std::lround(o.coarse_fraction * o.iterations)) : 0;
 }
 
-/// The frame's rgb / depth at the refiner's scale, with the paper's edge map when the loss uses it.
-Observation scale_frame(const Camera& camera, const Observation& frame, const RefinerOptions& o) {
+/// The frame's rgb / depth at `scale`, with the paper's edge map when the loss uses it.
+Observation scale_frame(const Camera& camera, const Observation& frame, const RefinerOptions& o, double scale) {
   Observation f;
   f.rgb = frame.rgb;
   f.depth = frame.depth;
   f.edges = frame.edges;
   f.validate(camera);
-  if (o.image_scale != 1.0) f = f.resized(scaled_camera(camera, o));
+  if (scale != 1.0) f = f.resized(scaled_camera(camera, scale));
   if (o.loss.weight_edges > 0 && f.has_rgb() && !f.has_edges()) f.edges = observed_edges(f.rgb);
   return f;
 }
@@ -94,7 +97,8 @@ RefineResult Refiner::refine(const Camera& camera, const Observation& observed, 
 }
 
 RefineRun::RefineRun(const RefinerOptions& o, const Camera& camera, const Observation& observed, const Mesh& mesh,
-                     const std::vector<Pose>& initials, const Observation* scaled_frame)
+                     const std::vector<Pose>& initials, const Observation* scaled_frame,
+                     const Observation* coarse_frame)
     : options_(o), mesh_(mesh), start_time_(std::chrono::steady_clock::now()), initials_(initials) {
   observed.validate(camera);
   if (!observed.has_rgb() && !observed.has_depth())
@@ -111,29 +115,37 @@ RefineRun::RefineRun(const RefinerOptions& o, const Camera& camera, const Observ
   const Pose& initial = initials.front();
   const int starts = int(initials.size());
 
-  cam_ = scaled_camera(camera, o);
-  if (scaled_frame) {
-    Observation own;  // this object's mask; the frame's images are shared
-    own.mask = observed.mask;
-    obs_ = o.image_scale == 1.0 ? own : own.resized(cam_);
-    obs_.rgb = scaled_frame->rgb;
-    obs_.depth = scaled_frame->depth;
-    obs_.edges = scaled_frame->edges;
-  } else {
-    obs_ = o.image_scale == 1.0 ? observed : observed.resized(cam_);
-  }
   loss_ = o.loss;
-  // The paper's edge term: Canny edges of the observed image, computed at the refiner's scale.
-  if (loss_.weight_edges > 0 && obs_.has_rgb() && !obs_.has_edges()) obs_.edges = observed_edges(obs_.rgb);
-  has_mask_ = obs_.has_mask();
-  if (has_mask_) {
-    if (cv::countNonZero(obs_.mask > 0) == 0) throw std::invalid_argument("refine: the object mask is empty");
-  } else {
-    obs_.mask = window_mask(cam_, mesh, initial, o.no_mask_window);
-    for (int j = 1; j < starts; ++j)
-      obs_.mask = cv::max(obs_.mask, window_mask(cam_, mesh, initials[j], o.no_mask_window));
-    loss_.weight_mask = 0;  // the window is not an observation of the silhouette
-  }
+  // The images at each scale: the frame's shared ones (refine_all) or resized here, this object's mask resized,
+  // and without a mask a window around the initial projections (the mask term then has no observation).
+  const auto make_level = [&](double scale, const Observation* shared) {
+    Level l;
+    l.cam = scaled_camera(camera, scale);
+    if (shared) {
+      Observation own;
+      own.mask = observed.mask;
+      l.obs = scale == 1.0 ? own : own.resized(l.cam);
+      l.obs.rgb = shared->rgb;
+      l.obs.depth = shared->depth;
+      l.obs.edges = shared->edges;
+    } else {
+      l.obs = scale == 1.0 ? observed : observed.resized(l.cam);
+    }
+    // The paper's edge term: Canny edges of the observed image, computed at this scale.
+    if (loss_.weight_edges > 0 && l.obs.has_rgb() && !l.obs.has_edges()) l.obs.edges = observed_edges(l.obs.rgb);
+    if (!l.obs.has_mask()) {
+      l.obs.mask = window_mask(l.cam, mesh, initial, o.no_mask_window);
+      for (int j = 1; j < starts; ++j) l.obs.mask = cv::max(l.obs.mask, window_mask(l.cam, mesh, initials[j], o.no_mask_window));
+    }
+    return l;
+  };
+  has_mask_ = observed.has_mask();
+  fine_ = make_level(o.image_scale, scaled_frame);
+  if (has_mask_ && cv::countNonZero(fine_.obs.mask > 0) == 0)
+    throw std::invalid_argument("refine: the object mask is empty");
+  if (!has_mask_) loss_.weight_mask = 0;  // the window is not an observation of the silhouette
+  switch_at_ = coarse_iterations(o);
+  if (switch_at_ > 0) coarse_ = make_level(o.image_scale * o.coarse_scale, coarse_frame);
 
   const int B = o.batch_size;
   std::mt19937_64 rng(o.seed);
@@ -169,6 +181,13 @@ const std::vector<Pose>& RefineRun::batch() {
     active_.resize((active_.size() + 1) / 2);
     std::sort(active_.begin(), active_.end());
   }
+  if (k_ == switch_at_ && switch_at_ > 0) {
+    // The fine phase begins: losses at the coarse scale do not compare with fine ones, so each run's best is
+    // sought again from here.
+    for (LossValue& b : best_) b.total = std::numeric_limits<double>::infinity();
+    best_overall_ = std::numeric_limits<double>::infinity();
+    stale_ = 0;
+  }
   batch_.resize(active_.size());
   for (size_t j = 0; j < active_.size(); ++j) batch_[j] = poses_[active_[j]];
   return batch_;
@@ -197,8 +216,12 @@ void RefineRun::absorb(const std::vector<LossValue>& values, const std::function
   best_overall_ = std::min(best_overall_, round_best);
   if (on_iteration) on_iteration(k_, iters, best_overall_);
   stale_ = improved ? 0 : stale_ + 1;
-  if (last || (o.early_stop_patience > 0 && stale_ >= o.early_stop_patience)) {
-    res_.iterations = std::min(k_, iters);
+  const bool stalled = o.early_stop_patience > 0 && stale_ >= o.early_stop_patience;
+  if (stalled && !last && coarse()) {  // the coarse phase has done its work: go on at the fine scale
+    k_ = switch_at_ - 1;
+    stale_ = 0;
+  } else if (last || stalled) {
+    res_.iterations = steps_;
     done_ = true;
     return;
   }
@@ -210,6 +233,7 @@ void RefineRun::absorb(const std::vector<LossValue>& values, const std::function
     poses_[i] = refiner_step(poses_[i], values[j].gradient, res_.learning_rates[i] * decay, diameter_, pivot);
   }
   ++k_;
+  ++steps_;
 }
 
 RefineResult RefineRun::finish(Renderer& renderer) {
@@ -225,20 +249,27 @@ RefineResult RefineRun::finish(Renderer& renderer) {
   res.loss = best_[res.winner];
   res.history = res.run_histories[res.winner];
 
+  const Camera& cam = fine_.cam;
+  const Observation& obs = fine_.obs;
+  if (switch_at_ > 0) {  // the first iteration was at the coarse scale: the initial loss at the fine one
+    std::vector<LossValue> v;
+    renderer.evaluate(cam, mesh_, obs, initials_, loss_, false, v);
+    res.initial_loss = std::min_element(v.begin(), v.end(), [](auto& a, auto& b) { return a.total < b.total; })->total;
+  }
   // Quality scores at the refined pose.
-  const RenderImage img = renderer.render(cam_, mesh_, {res.pose}, obs_.mask)[0];
+  const RenderImage img = renderer.render(cam, mesh_, {res.pose}, obs.mask)[0];
   const cv::Mat rendered = img.coverage >= 0.5f;
   if (has_mask_) {
-    const cv::Mat observed_mask = obs_.mask >= 0.5f;
+    const cv::Mat observed_mask = obs.mask >= 0.5f;
     const double inter = cv::countNonZero(rendered & observed_mask), uni = cv::countNonZero(rendered | observed_mask);
     res.mask_iou = uni > 0 ? inter / uni : 0.0;
   }
-  if (obs_.has_depth()) {
+  if (obs.has_depth()) {
     // Over the observed object, or (without a mask) over what the render covers: the window is not the object.
-    const cv::Mat object = (has_mask_ ? cv::Mat(obs_.mask >= 0.5f) : rendered) & (obs_.depth > 0);
+    const cv::Mat object = (has_mask_ ? cv::Mat(obs.mask >= 0.5f) : rendered) & (obs.depth > 0);
     const int n = cv::countNonZero(object);
     cv::Mat diff;
-    cv::absdiff(obs_.depth, img.depth, diff);
+    cv::absdiff(obs.depth, img.depth, diff);
     const cv::Mat inlier = object & (img.depth > 0) & (diff < o.inlier_threshold);
     res.depth_inliers = n > 0 ? double(cv::countNonZero(inlier)) / n : 0.0;
   }
@@ -259,9 +290,11 @@ std::vector<RefineResult> Refiner::refine_all(const Camera& camera, const Observ
   std::vector<std::unique_ptr<RefineRun>> runs(objects.size());
   // The frame is resized (and its edges found) once for all objects. A frame that does not fit the camera is
   // reported by each object's own check below.
-  std::optional<Observation> shared_frame;
+  std::optional<Observation> shared_frame, coarse_frame;
   try {
-    shared_frame = scale_frame(camera, frame, options_);
+    shared_frame = scale_frame(camera, frame, options_, options_.image_scale);
+    if (coarse_iterations(options_) > 0)
+      coarse_frame = scale_frame(camera, frame, options_, options_.image_scale * options_.coarse_scale);
   } catch (const std::invalid_argument&) {
   }
   const auto fail = [&](size_t k, const std::string& why) {
@@ -282,7 +315,8 @@ std::vector<RefineResult> Refiner::refine_all(const Camera& camera, const Observ
       std::vector<Pose> initials{t.initial};
       initials.insert(initials.end(), t.alternatives.begin(), t.alternatives.end());
       runs[k] = std::make_unique<RefineRun>(options_, camera, o, *t.mesh, initials,
-                                            shared_frame ? &*shared_frame : nullptr);
+                                            shared_frame ? &*shared_frame : nullptr,
+                                            coarse_frame ? &*coarse_frame : nullptr);
     } catch (const std::exception& e) {
       fail(k, e.what());
     }
@@ -293,41 +327,47 @@ std::vector<RefineResult> Refiner::refine_all(const Camera& camera, const Observ
   std::vector<ObjectBatch> batches;
   std::vector<size_t> which;
   std::vector<std::vector<LossValue>> values;
-  for (;;) {
-    batches.clear();
-    which.clear();
-    bool with_gradient = false;
-    for (size_t k = 0; k < runs.size(); ++k) {
-      if (!runs[k] || runs[k]->done()) continue;
-      RefineRun& r = *runs[k];
-      ObjectBatch b;
-      b.mesh = &r.mesh();
-      b.mask = r.observation().mask;
-      b.loss = r.loss();
-      b.poses = r.batch();
-      batches.push_back(std::move(b));
-      which.push_back(k);
-      with_gradient = with_gradient || r.with_gradient();
-    }
-    if (batches.empty()) break;
-    const Camera& cam = runs[which[0]]->camera();  // the same scaled camera for every object
-    try {
-      renderer_->evaluate_objects(cam, *shared_frame, batches, with_gradient, values);
-    } catch (const std::exception&) {
-      // One object's input broke the joint call: evaluate them one by one so only that object fails.
-      values.assign(which.size(), {});
-      for (size_t j = 0; j < which.size(); ++j) {
-        std::vector<std::vector<LossValue>> one;
-        try {
-          renderer_->evaluate_objects(cam, *shared_frame, {batches[j]}, with_gradient, one);
-          values[j] = std::move(one[0]);
-        } catch (const std::exception& e) {
-          fail(which[j], e.what());
+  for (bool any = true; any;) {
+    any = false;
+    // Runs in the coarse phase and runs in the fine phase are evaluated in separate calls (other images).
+    for (const bool coarse : {true, false}) {
+      batches.clear();
+      which.clear();
+      bool with_gradient = false;
+      for (size_t k = 0; k < runs.size(); ++k) {
+        if (!runs[k] || runs[k]->done() || runs[k]->coarse() != coarse) continue;
+        RefineRun& r = *runs[k];
+        ObjectBatch b;
+        b.mesh = &r.mesh();
+        b.mask = r.observation().mask;
+        b.loss = r.loss();
+        b.poses = r.batch();
+        batches.push_back(std::move(b));
+        which.push_back(k);
+        with_gradient = with_gradient || r.with_gradient();
+      }
+      if (batches.empty()) continue;
+      any = true;
+      const Camera& cam = runs[which[0]]->camera();  // the same scaled camera for every object of the phase
+      const Observation& images = coarse ? *coarse_frame : *shared_frame;
+      try {
+        renderer_->evaluate_objects(cam, images, batches, with_gradient, values);
+      } catch (const std::exception&) {
+        // One object's input broke the joint call: evaluate them one by one so only that object fails.
+        values.assign(which.size(), {});
+        for (size_t j = 0; j < which.size(); ++j) {
+          std::vector<std::vector<LossValue>> one;
+          try {
+            renderer_->evaluate_objects(cam, images, {batches[j]}, with_gradient, one);
+            values[j] = std::move(one[0]);
+          } catch (const std::exception& e) {
+            fail(which[j], e.what());
+          }
         }
       }
+      for (size_t j = 0; j < which.size(); ++j)
+        if (runs[which[j]]) runs[which[j]]->absorb(values[j], nullptr);
     }
-    for (size_t j = 0; j < which.size(); ++j)
-      if (runs[which[j]]) runs[which[j]]->absorb(values[j], nullptr);
   }
   for (size_t k = 0; k < runs.size(); ++k) {
     if (!runs[k]) continue;

@@ -34,6 +34,8 @@ RefinerOptions parse(const YAML::Node& root, RefinerOptions o, const std::string
     read(root, "lr_log_uniform", o.lr_log_uniform, used);
     read(root, "lr_decay", o.lr_decay, used);
     read(root, "image_scale", o.image_scale, used);
+    read(root, "coarse_fraction", o.coarse_fraction, used);
+    read(root, "coarse_scale", o.coarse_scale, used);
     read(root, "seed", o.seed, used);
     read(root, "successive_halving", o.successive_halving, used);
     read(root, "early_stop_patience", o.early_stop_patience, used);
@@ -63,6 +65,7 @@ RefinerOptions parse(const YAML::Node& root, RefinerOptions o, const std::string
       read(r, "auto_cull_closed", o.render.auto_cull_closed, ru);
       read(r, "near_plane", o.render.near_plane, ru);
       read(r, "roi_margin", o.render.roi_margin, ru);
+      read(r, "lod_pixel_error", o.render.lod_pixel_error, ru);
       read(r, "threads", o.render.threads, ru);
       reject_unknown(r, ru, origin + " (render)");
     }
@@ -118,11 +121,15 @@ void RefinerOptions::validate() const {
   if (!(lr_low > 0) || !(lr_high >= lr_low)) fail("need 0 < lr_low <= lr_high");
   if (!(lr_decay > 0) || lr_decay > 1) fail("lr_decay must be in (0, 1]");
   if (!(image_scale > 0) || image_scale > 4) fail("image_scale must be in (0, 4]");
+  if (!(coarse_fraction >= 0) || !(coarse_fraction < 1)) fail("coarse_fraction must be in [0, 1)");
+  if (!(coarse_scale > 0) || !(coarse_scale <= 1)) fail("coarse_scale must be in (0, 1]");
   if (loss.weight_rgb < 0 || loss.weight_depth < 0 || loss.weight_mask < 0 || loss.weight_edges < 0)
     fail("loss weights must be >= 0");
   if (!(loss.edge_scale > 0)) fail("loss.edge_scale must be > 0");
   if (!(loss.depth_truncation > 0)) fail("loss.depth_truncation must be > 0");
   if (early_stop_patience < 0) fail("early_stop_patience must be >= 0");
+  if (!(render.lod_pixel_error >= 0) || render.lod_pixel_error > 100)
+    fail("render.lod_pixel_error must be in [0, 100] pixels (0: always the full mesh)");
   if (device != "cpu" && device != "cuda" && device != "auto") fail("device must be auto, cpu or cuda");
 }
 

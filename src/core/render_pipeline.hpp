@@ -80,6 +80,7 @@ class PipelineRenderer final : public Renderer {
       const Hypothesis& hy = hyp_[h];
       const PixelRect roi{hy.x0, hy.y0, hy.x0 + hy.w, hy.y0 + hy.h};
       out[h] = make_render_image(camera, roi, pre.data() + hy.offset, post.data() + hy.offset, tri.data() + hy.offset);
+      out[h].lod = object_lod_[0];
     }
     return out;
   }
@@ -140,46 +141,42 @@ class PipelineRenderer final : public Renderer {
     int B, pixels, max_vertices, max_triangles, max_pixels;
   };
 
-  /// A mesh's arrays and textures on the executor.
-  struct ExecMesh {
+  /// One level of detail of a mesh on the executor.
+  struct ExecTriangles {
     typename Exec::template Buffer<Vec3f> positions, colors;
     typename Exec::template Buffer<Vec2f> uvs;
     typename Exec::template Buffer<int> triangles, tri_texture, neighbors, opposite;
     typename Exec::template Buffer<unsigned char> seams;
     typename Exec::template Buffer<float> tri_uv_area;
+  };
+  /// A mesh's levels of detail (Mesh::lods()) and textures on the executor.
+  struct ExecMesh {
+    std::vector<std::unique_ptr<ExecTriangles>> levels;  // 0: the full mesh
+    std::vector<MeshView> views;                         // per level
     std::vector<std::unique_ptr<typename Exec::template Buffer<float>>> texels;  // one per texture level
     typename Exec::template Buffer<TextureView> textures;
-    MeshView view{};
     uint64_t used = 0;  // uses_ at the last call that used it
   };
   static constexpr size_t kMaxMeshes = 64;
 
-  const MeshView& upload_mesh(const Mesh& mesh) {
+  const ExecMesh& upload_mesh(const Mesh& mesh) {
     if (mesh.num_triangles() == 0 || mesh.neighbors().size() != mesh.triangles.size() || mesh.content_id() == 0)
       throw std::invalid_argument("renderer: mesh '" + mesh.name + "' is empty or not finalized");
     ++uses_;
     // Keyed by the content id finalize() gives (an address can be reused by another mesh; a copy shares the
     // content and the id). The counts guard against a mesh resized after finalize() without a new one.
     auto& slot = meshes_[mesh.content_id()];
-    if (slot && slot->view.num_vertices == mesh.num_vertices() && slot->view.num_triangles == mesh.num_triangles()) {
+    if (slot && slot->views[0].num_vertices == mesh.num_vertices() &&
+        slot->views[0].num_triangles == mesh.num_triangles() && slot->views.size() == mesh.lods().size() + 1) {
       slot->used = uses_;
-      return slot->view;
+      return *slot;
     }
     slot = std::make_unique<ExecMesh>();
     ExecMesh& d = *slot;
     d.used = uses_;
     evict_meshes();
     std::vector<TextureView> host_views;
-    const MeshView h = mesh.view(host_views);
-    exec_.upload(d.positions, h.positions, h.num_vertices);
-    exec_.upload(d.colors, h.colors, h.num_vertices);
-    if (h.uvs) exec_.upload(d.uvs, h.uvs, h.num_vertices);
-    exec_.upload(d.triangles, h.triangles, 3 * size_t(h.num_triangles));
-    exec_.upload(d.tri_texture, h.tri_texture, h.num_triangles);
-    exec_.upload(d.neighbors, h.neighbors, 3 * size_t(h.num_triangles));
-    exec_.upload(d.opposite, h.opposite, 3 * size_t(h.num_triangles));
-    exec_.upload(d.seams, h.seams, 3 * size_t(h.num_triangles));
-    exec_.upload(d.tri_uv_area, h.tri_uv_area, h.num_triangles);
+    mesh.view(host_views);
     std::vector<TextureView> exec_views = host_views;
     for (size_t t = 0; t < host_views.size(); ++t)
       for (int l = 0; l < host_views[t].levels; ++l) {
@@ -189,19 +186,51 @@ class PipelineRenderer final : public Renderer {
         exec_views[t].level[l].rgb = d.texels.back()->ptr;
       }
     if (!exec_views.empty()) exec_.upload(d.textures, exec_views.data(), exec_views.size());
+    std::vector<TextureView> unused;
+    for (size_t level = 0; level <= mesh.lods().size(); ++level) {
+      const MeshView l = mesh.view(unused, int(level));
+      d.levels.push_back(std::make_unique<ExecTriangles>());
+      ExecTriangles& t = *d.levels.back();
+      exec_.upload(t.positions, l.positions, l.num_vertices);
+      exec_.upload(t.colors, l.colors, l.num_vertices);
+      if (l.uvs) exec_.upload(t.uvs, l.uvs, l.num_vertices);
+      exec_.upload(t.triangles, l.triangles, 3 * size_t(l.num_triangles));
+      exec_.upload(t.tri_texture, l.tri_texture, l.num_triangles);
+      exec_.upload(t.neighbors, l.neighbors, 3 * size_t(l.num_triangles));
+      exec_.upload(t.opposite, l.opposite, 3 * size_t(l.num_triangles));
+      exec_.upload(t.seams, l.seams, 3 * size_t(l.num_triangles));
+      exec_.upload(t.tri_uv_area, l.tri_uv_area, l.num_triangles);
+      MeshView v = l;
+      v.positions = t.positions.ptr;
+      v.colors = t.colors.ptr;
+      v.uvs = l.uvs ? t.uvs.ptr : nullptr;
+      v.triangles = t.triangles.ptr;
+      v.tri_texture = t.tri_texture.ptr;
+      v.neighbors = t.neighbors.ptr;
+      v.opposite = t.opposite.ptr;
+      v.seams = t.seams.ptr;
+      v.tri_uv_area = t.tri_uv_area.ptr;
+      v.textures = exec_views.empty() ? nullptr : d.textures.ptr;
+      d.views.push_back(v);
+    }
     exec_.synchronize("mesh upload");  // host_views / exec_views are about to go away
-    d.view = h;
-    d.view.positions = d.positions.ptr;
-    d.view.colors = d.colors.ptr;
-    d.view.uvs = h.uvs ? d.uvs.ptr : nullptr;
-    d.view.triangles = d.triangles.ptr;
-    d.view.tri_texture = d.tri_texture.ptr;
-    d.view.neighbors = d.neighbors.ptr;
-    d.view.opposite = d.opposite.ptr;
-    d.view.seams = d.seams.ptr;
-    d.view.tri_uv_area = d.tri_uv_area.ptr;
-    d.view.textures = exec_views.empty() ? nullptr : d.textures.ptr;
-    return d.view;
+    return d;
+  }
+
+  /// The level of detail to draw `mesh` at for these poses: the coarsest whose error projects to at most
+  /// RenderOptions::lod_pixel_error pixels at the nearest point of the object (bounding sphere) of any pose.
+  int choose_lod(const Mesh& mesh, const Camera& camera, const std::vector<Pose>& poses) const {
+    if (mesh.lods().empty() || !(options_.lod_pixel_error > 0)) return 0;
+    double z_near = std::numeric_limits<double>::infinity();
+    const double radius = 0.5 * (mesh.bbox_max() - mesh.bbox_min()).norm();
+    for (const Pose& q : poses)
+      if (q.t.allFinite() && q.R.allFinite()) z_near = std::min(z_near, (q * mesh.center()).z() - radius);
+    if (!(z_near > options_.near_plane)) return 0;  // the object reaches the camera: full detail
+    const double px_per_m = std::max(camera.fx, camera.fy) / z_near;
+    int level = 0;
+    for (size_t l = 0; l < mesh.lods().size(); ++l)
+      if (mesh.lods()[l].error * px_per_m <= options_.lod_pixel_error) level = int(l) + 1;
+    return level;
   }
 
   /// Keeps at most kMaxMeshes uploaded meshes, dropping the least recently used ones that the current call
@@ -231,6 +260,7 @@ class PipelineRenderer final : public Renderer {
     p.image_h = camera.height;
 
     object_params_.resize(objects.size());
+    object_lod_.resize(objects.size());
     size_t B = 0;
     for (const ObjectCall& o : objects) B += o.poses->size();
     if (B > 65535) throw std::invalid_argument("renderer: too many hypotheses in one call");
@@ -242,10 +272,11 @@ class PipelineRenderer final : public Renderer {
       const Mesh& mesh = *objects[k].mesh;
       ObjectParams& op = object_params_[k];
       op = ObjectParams{};
-      op.M = upload_mesh(mesh);
-      op.nv = mesh.num_vertices();
-      op.nt = mesh.num_triangles();
-      op.cull = options_.cull_back_faces || (options_.auto_cull_closed && mesh.closed_and_outward());
+      const int lod = object_lod_[k] = choose_lod(mesh, camera, *objects[k].poses);
+      op.M = upload_mesh(mesh).views[size_t(lod)];
+      op.nv = op.M.num_vertices;
+      op.nt = op.M.num_triangles;
+      op.cull = options_.cull_back_faces || (options_.auto_cull_closed && mesh.closed_and_outward(lod));
       c.max_vertices = std::max(c.max_vertices, op.nv);
       c.max_triangles = std::max(c.max_triangles, op.nt);
       const PixelRect& box = objects[k].box;
@@ -414,6 +445,7 @@ class PipelineRenderer final : public Renderer {
   uint64_t uses_ = 0, call_start_ = 0;
   std::vector<Hypothesis> hyp_;
   std::vector<ObjectParams> object_params_;
+  std::vector<int> object_lod_;  // level of detail of each object of the call
   std::deque<SetupCache> setups_;  // per object slot of evaluate_objects; a deque, so
                                    // growing it keeps the references of the call in progress valid
   std::vector<uint64_t> mask_generation_;

@@ -54,11 +54,14 @@ struct TriangleRaster {
 
 /// Pixel bounding box (inclusive) of the pixel centres the triangle can cover; empty (x0 > x1 or y0 > y1) for a
 /// triangle between pixel centres, which a dense mesh far away mostly has: those skip the fixed-point set-up.
+/// (Plain comparisons instead of fminf / fmaxf, which are library calls on the host; the positions are finite.)
 DD_HOST_DEVICE void raster_bounds(const Vec2f s[3], int* x0, int* x1, int* y0, int* y1) {
-  *x0 = static_cast<int>(ceilf(fminf(fminf(s[0].x, s[1].x), s[2].x)));
-  *x1 = static_cast<int>(floorf(fmaxf(fmaxf(s[0].x, s[1].x), s[2].x)));
-  *y0 = static_cast<int>(ceilf(fminf(fminf(s[0].y, s[1].y), s[2].y)));
-  *y1 = static_cast<int>(floorf(fmaxf(fmaxf(s[0].y, s[1].y), s[2].y)));
+  const float lx = s[0].x < s[1].x ? s[0].x : s[1].x, hx = s[0].x > s[1].x ? s[0].x : s[1].x;
+  const float ly = s[0].y < s[1].y ? s[0].y : s[1].y, hy = s[0].y > s[1].y ? s[0].y : s[1].y;
+  *x0 = static_cast<int>(ceilf(lx < s[2].x ? lx : s[2].x));
+  *x1 = static_cast<int>(floorf(hx > s[2].x ? hx : s[2].x));
+  *y0 = static_cast<int>(ceilf(ly < s[2].y ? ly : s[2].y));
+  *y1 = static_cast<int>(floorf(hy > s[2].y ? hy : s[2].y));
 }
 
 /// s: pixel positions, z: camera depths of the three vertices. False when the triangle has no fixed-point area.
