@@ -26,11 +26,11 @@ Mesh make_l_block(double size, Texture texture);
 /// Kinds of make_scan_like() object. The object's up axis is +z; the proportions listed are the natural ones
 /// (x : y : z); other sizes stretch the shape along the axes.
 enum class ScanShape {
-  /// Mustard/detergent-like bottle (about 0.5 : 0.3 : 1): elliptical body slightly fuller on +y, a waist, a
+  /// Mustard/detergent-like bottle (about 0.48 : 0.3 : 1): elliptical body slightly fuller on +y, a waist, a
   /// shoulder to a neck offset towards +x and a ribbed screw cap; printed front (+y) and back (-y) labels. No
   /// symmetry, neither in shape nor in print.
   Bottle,
-  /// Mug (about 1.16 : 0.84 : 1): body of revolution with a real wall (outer wall, rounded rim, inner wall,
+  /// Mug (about 1.13 : 0.84 : 1): body of revolution with a real wall (outer wall, rounded rim, inner wall,
   /// inner bottom) and a handle towards +x; a printed band around the outer wall leaves the handle side free.
   /// The handle is its own closed shell whose ends sit inside the wall (the two shells interpenetrate, as in
   /// many modelled meshes; the surface is still closed and outward, so culling back faces stays exact).
@@ -50,12 +50,15 @@ enum class ScanShape {
 ///   valences vary as in a remeshed scan. The triangle count is within a few percent of `triangles`.
 ///   Triangles are wound counter-clockwise seen from outside; closed_and_outward() holds.
 /// - Bounding box: exactly `size` (metres, x y z), centred on the origin.
-/// - UV atlas: the surface is split into ~30-60 charts grown over the triangles (normals within 60 degrees
-///   of the chart's seed), each projected onto its mean plane (UVs counter-clockwise like the triangles) and
-///   packed into its own rectangle of the atlas with a gutter; vertices on chart borders are duplicated with
-///   different UVs (seams). Texel colours are computed from the 3-D surface point (labels, text, barcode, cap
-///   ribs...), so the print is continuous across chart seams; texels outside the charts take the colour of the
-///   nearest chart texel (bleeding, as scan textures do), so filtering at seams does not show the background.
+/// - UV atlas: the surface is split into ~25-50 charts grown over the triangles from farthest-point seeds
+///   (normals within 60 degrees of the chart's mean normal, a bounded radius; tiny leftovers merged into a
+///   neighbour; triangles that would fold in the chart's projection re-charted). Each chart is projected
+///   onto its mean plane (UVs counter-clockwise like the triangles, charts disjoint) and packed into its own
+///   rectangle of the atlas with a gutter; vertices on chart borders are duplicated with different UVs (seams).
+/// - Texture: texel colours are computed from the 3-D surface point (labels, text, barcode, cap ribs...), so
+///   the print is continuous across chart seams. A 1.5-texel ring around each chart continues its surface, so
+///   filtering at a seam reads the same print on both sides; the other texels outside the charts take the
+///   colour of the nearest chart texel (bleeding, as scan textures do), so coarse mip levels show no background.
 /// - Deterministic for a given `seed` (shape, triangulation, charts and print).
 ///
 /// Throws std::invalid_argument when a size is not positive, `triangles` < 200 or `texture_size` < 64.
