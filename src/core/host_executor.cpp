@@ -94,21 +94,35 @@ class HostExec {
   }
 
  private:
+  /// Stages over the pixels of a region (kPixels) are walked row by row: no division per pixel.
+  template <class Stage>
+  static constexpr bool per_pixel() {
+    return pipeline::is_pixel_stage<Stage>::value;
+  }
   template <class Stage>
   static void step(const pipeline::Each<Stage>& s, int h) {
     const int n = std::min(s.n, s.stage.count(h));
-    for (int i = 0; i < n; ++i) s.stage(i, h);
+    if (n <= 0) return;
+    if constexpr (per_pixel<Stage>()) {
+      const int w = s.stage.p.H[h].w, rows = n / w;
+      for (int ly = 0, i = 0; ly < rows; ++ly)
+        for (int lx = 0; lx < w; ++lx, ++i) s.stage.pixel(lx, ly, i, h);
+    } else {
+      for (int i = 0; i < n; ++i) s.stage(i, h);
+    }
   }
   template <class Stage>
   static void step(const pipeline::Sum<Stage>& s, int h) {
     const int n = std::min(s.n, s.stage.count(h));
     if (n <= 0) return;
     double sum[Stage::kValues] = {};
-    for (int i = 0; i < n; ++i) {
-      double v[Stage::kValues] = {};
-      s.stage(i, h, v);
-      for (int k = 0; k < Stage::kValues; ++k) sum[k] += v[k];
-    }
+    const int w = s.stage.p.H[h].w, rows = n / w;
+    for (int ly = 0, i = 0; ly < rows; ++ly)
+      for (int lx = 0; lx < w; ++lx, ++i) {
+        double v[Stage::kValues] = {};
+        s.stage.pixel(lx, ly, i, h, v);
+        for (int k = 0; k < Stage::kValues; ++k) sum[k] += v[k];
+      }
     for (int k = 0; k < Stage::kValues; ++k) s.out[size_t(s.stride) * h + k] += sum[k];
   }
 

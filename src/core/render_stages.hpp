@@ -36,6 +36,16 @@ struct Sum {
   int stride;
 };
 
+/// Whether a stage runs over the pixels of the regions (has kPixels and pixel(lx, ly, i, h, ...)).
+template <class Stage, class = void>
+struct is_pixel_stage {
+  static constexpr bool value = false;
+};
+template <class Stage>
+struct is_pixel_stage<Stage, decltype(void(Stage::kPixels))> {
+  static constexpr bool value = Stage::kPixels;
+};
+
 /// One object of a call: its mesh on the executor and, when evaluating, its loss constants and mask.
 struct ObjectParams {
   MeshView M;
@@ -201,7 +211,12 @@ struct ShadeStage {
   static constexpr const char* kName = "shade";
   Pipeline p;
   DD_HOST_DEVICE int count(int h) const { return p.H[h].w * p.H[h].h; }
+  static constexpr bool kPixels = true;  // pixel(lx, ly, i, h): the host executor walks rows, no division
   DD_HOST_DEVICE void operator()(int i, int h) const {
+    const int w = p.H[h].w;
+    pixel(i % w, i / w, i, h);
+  }
+  DD_HOST_DEVICE void pixel(int lx, int ly, int i, int h) const {
     const Hypothesis& hy = p.H[h];
     if (i >= hy.w * hy.h) return;
     const int q = hy.offset + i;
@@ -212,8 +227,8 @@ struct ShadeStage {
     if (t >= 0) {
       Vec3f c;
       float d;
-      shade_pixel(p.objects[hy.object].M, projected(p, hy), p.K, t, float(hy.x0 + i % hy.w),
-                  float(hy.y0 + i / hy.w), &c, &d, false, &p.bary[q]);
+      shade_pixel(p.objects[hy.object].M, projected(p, hy), p.K, t, float(hy.x0 + lx),
+                  float(hy.y0 + ly), &c, &d, false, &p.bary[q]);
       a = PixelAttr{1.f, {c.x, c.y, c.z}, d};
     }
     p.pre[q] = a;
@@ -227,10 +242,15 @@ struct BlendDetectStage {
   static constexpr const char* kName = "blend detect";
   Pipeline p;
   DD_HOST_DEVICE int count(int h) const { return p.H[h].w * p.H[h].h; }
+  static constexpr bool kPixels = true;  // pixel(lx, ly, i, h): the host executor walks rows, no division
   DD_HOST_DEVICE void operator()(int i, int h) const {
+    const int w = p.H[h].w;
+    pixel(i % w, i / w, i, h);
+  }
+  DD_HOST_DEVICE void pixel(int lx, int ly, int i, int h) const {
     const Hypothesis& hy = p.H[h];
     if (i >= hy.w * hy.h) return;
-    const int lx = i % hy.w, ly = i / hy.w, a = hy.offset + i;
+    const int a = hy.offset + i;
     const ProjectedView G = projected(p, hy);
     const MeshView& M = p.objects[hy.object].M;
     const Vec2f pa{float(hy.x0 + lx), float(hy.y0 + ly)};
@@ -253,8 +273,7 @@ struct BlendDetectStage {
 /// The (up to four) event slots that can target pixel q, in the CPU's scan order (pixels row by row, each
 /// pixel's horizontal pair before its vertical one): upper neighbour's vertical, left neighbour's horizontal,
 /// then q's own two. So blended attributes add up in the same order as on the CPU.
-DD_HOST_DEVICE int event_slots(const Hypothesis& hy, int i, int q, int slots[4]) {
-  const int lx = i % hy.w, ly = i / hy.w;
+DD_HOST_DEVICE int event_slots(const Hypothesis& hy, int lx, int ly, int q, int slots[4]) {
   int n = 0;
   if (ly > 0) slots[n++] = 2 * (q - hy.w) + 1;
   if (lx > 0) slots[n++] = 2 * (q - 1);
@@ -268,12 +287,17 @@ struct BlendApplyStage {
   static constexpr const char* kName = "blend apply";
   Pipeline p;
   DD_HOST_DEVICE int count(int h) const { return p.H[h].w * p.H[h].h; }
+  static constexpr bool kPixels = true;  // pixel(lx, ly, i, h): the host executor walks rows, no division
   DD_HOST_DEVICE void operator()(int i, int h) const {
+    const int w = p.H[h].w;
+    pixel(i % w, i / w, i, h);
+  }
+  DD_HOST_DEVICE void pixel(int lx, int ly, int i, int h) const {
     const Hypothesis& hy = p.H[h];
     if (i >= hy.w * hy.h) return;
     const int q = hy.offset + i;
     int slots[4];
-    const int n = event_slots(hy, i, q, slots);
+    const int n = event_slots(hy, lx, ly, q, slots);
     PixelAttr out = p.post[q];
     for (int k = 0; k < n; ++k)
       if (p.has_event[slots[k]] && p.events[slots[k]].to == q) apply_blend(p.events[slots[k]], p.pre[q], &out);
@@ -286,13 +310,18 @@ struct LossStage {
   static constexpr const char* kName = "loss";
   Pipeline p;
   DD_HOST_DEVICE int count(int h) const { return p.H[h].w * p.H[h].h; }
-  static constexpr int kValues = 3;
+  static constexpr bool kPixels = true;  // pixel(lx, ly, i, h): the host executor walks rows, no division
   DD_HOST_DEVICE void operator()(int i, int h, double* v) const {
+    const int w = p.H[h].w;
+    pixel(i % w, i / w, i, h, v);
+  }
+  static constexpr int kValues = 3;
+  DD_HOST_DEVICE void pixel(int lx, int ly, int i, int h, double* v) const {
     const Hypothesis& hy = p.H[h];
     if (i >= hy.w * hy.h || !hy.valid) return;
     const ObjectParams& o = p.objects[hy.object];
     const int q = hy.offset + i;
-    const int pix = (hy.y0 + i / hy.w) * p.image_w + hy.x0 + i % hy.w;
+    const int pix = (hy.y0 + ly) * p.image_w + hy.x0 + lx;
     const float S = o.S ? o.S[pix] : 1.f;
     const float zero3[3] = {0.f, 0.f, 0.f};
     const float* I = p.I ? p.I + 3 * pix : zero3;
@@ -324,12 +353,17 @@ struct EdgeStage {
   static constexpr const char* kName = "edges sobel";
   Pipeline p;
   DD_HOST_DEVICE int count(int h) const { return p.H[h].w * p.H[h].h; }
-  static constexpr int kValues = 1;
+  static constexpr bool kPixels = true;  // pixel(lx, ly, i, h): the host executor walks rows, no division
   DD_HOST_DEVICE void operator()(int i, int h, double* v) const {
+    const int w = p.H[h].w;
+    pixel(i % w, i / w, i, h, v);
+  }
+  static constexpr int kValues = 1;
+  DD_HOST_DEVICE void pixel(int lx, int ly, int i, int h, double* v) const {
     const Hypothesis& hy = p.H[h];
     const ObjectParams& o = p.objects[hy.object];
     if (i >= hy.w * hy.h || !hy.valid || o.k_edges == 0.f) return;
-    const int q = hy.offset + i, lx = i % hy.w, ly = i / hy.w;
+    const int q = hy.offset + i;
     const int pix = (hy.y0 + ly) * p.image_w + hy.x0 + lx;
     const float S = o.S ? o.S[pix] : 1.f;
     v[0] = edge_term_step(p.grey + hy.offset, hy.w, hy.h, lx, ly, o.edge_scale, S, p.E[pix], o.k_edges,
@@ -342,10 +376,15 @@ struct EdgeGatherStage {
   static constexpr const char* kName = "edges gather";
   Pipeline p;
   DD_HOST_DEVICE int count(int h) const { return p.H[h].w * p.H[h].h; }
+  static constexpr bool kPixels = true;  // pixel(lx, ly, i, h): the host executor walks rows, no division
   DD_HOST_DEVICE void operator()(int i, int h) const {
+    const int w = p.H[h].w;
+    pixel(i % w, i / w, i, h);
+  }
+  DD_HOST_DEVICE void pixel(int lx, int ly, int i, int h) const {
     const Hypothesis& hy = p.H[h];
     if (i >= hy.w * hy.h || !hy.valid || p.objects[hy.object].k_edges == 0.f) return;
-    const float g = grey_gradient(p.g_sx + hy.offset, p.g_sy + hy.offset, hy.w, hy.h, i % hy.w, i / hy.w) / 3.f;
+    const float g = grey_gradient(p.g_sx + hy.offset, p.g_sy + hy.offset, hy.w, hy.h, lx, ly) / 3.f;
     for (int ch = 0; ch < 3; ++ch) p.g_post[hy.offset + i].c[ch] += g;
   }
 };
@@ -356,8 +395,13 @@ struct BackwardStage {
   static constexpr const char* kName = "backward";
   Pipeline p;
   DD_HOST_DEVICE int count(int h) const { return p.H[h].w * p.H[h].h; }
-  static constexpr int kValues = 6;
+  static constexpr bool kPixels = true;  // pixel(lx, ly, i, h): the host executor walks rows, no division
   DD_HOST_DEVICE void operator()(int i, int h, double* g6) const {
+    const int w = p.H[h].w;
+    pixel(i % w, i / w, i, h, g6);
+  }
+  static constexpr int kValues = 6;
+  DD_HOST_DEVICE void pixel(int lx, int ly, int i, int h, double* g6) const {
     const Hypothesis& hy = p.H[h];
     if (i >= hy.w * hy.h || !hy.valid) return;
     const MeshView& M = p.objects[hy.object].M;
@@ -365,13 +409,13 @@ struct BackwardStage {
     const ProjectedView G = projected(p, hy);
     PixelAttr g_pre = p.g_post[q];
     int slots[4];
-    const int n = event_slots(hy, i, q, slots);
+    const int n = event_slots(hy, lx, ly, q, slots);
     for (int k = 0; k < n; ++k)
       if (p.has_event[slots[k]] && p.events[slots[k]].to == q)
         blend_backward(M, G, p.K, p.events[slots[k]], p.pre[q], p.g_post[q], &g_pre, g6);
     const int t = p.tri[q];
     if (t >= 0 && (g_pre.c[0] != 0.f || g_pre.c[1] != 0.f || g_pre.c[2] != 0.f || g_pre.d != 0.f))
-      shade_pixel_backward(M, G, p.K, t, float(hy.x0 + i % hy.w), float(hy.y0 + i / hy.w),
+      shade_pixel_backward(M, G, p.K, t, float(hy.x0 + lx), float(hy.y0 + ly),
                            Vec3f{g_pre.c[0], g_pre.c[1], g_pre.c[2]}, g_pre.d, g6, false, &p.bary[q]);
   }
 };
