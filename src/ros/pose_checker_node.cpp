@@ -7,6 +7,7 @@
 #include <tf2_ros/buffer.h>
 #include <tf2_ros/transform_listener.h>
 
+#include <algorithm>
 #include <boost/bind/bind.hpp>
 #include <cmath>
 #include <cstdio>
@@ -35,8 +36,17 @@ struct CheckerNode {
   double idle_timeout = 5, start_timeout = 60;
   int exit_code = -1;
 
+  // Refined frames (one RefinedPoseArray each) against the bag time the ground truth spans.
+  int refined_frames = 0;
+  double first_truth = 0, last_truth = 0;
+
   void onTruth(const diffdope_ros::InitialPoseArrayConstPtr& m) {
     checker->addGroundTruth(*m);
+    if (!m->poses.empty()) {
+      const double t = m->poses.front().pose.header.stamp.toSec();
+      if (first_truth == 0 || t < first_truth) first_truth = t;
+      last_truth = std::max(last_truth, t);
+    }
     for (const auto& p : m->poses) truth[{int64_t(p.pose.header.stamp.toNSec()), p.name}] = p.pose;
   }
   /// Mean detector error per object (translation m, rotation rad) over detections with ground truth.
@@ -66,6 +76,7 @@ struct CheckerNode {
       std::printf("Per refined object: its start (detector, track, or prediction = track extrapolated) and the\n"
                   "start's and the refined pose's error against ground truth.\n");
     last_refined = ros::WallTime::now();
+    ++refined_frames;
     for (const auto& row : checker->addRefined(*m)) std::printf("%s\n", diffdope_ros::PoseChecker::formatRow(row).c_str());
     std::fflush(stdout);
   }
@@ -97,6 +108,9 @@ struct CheckerNode {
       if (det.count(name))
         std::printf("%-8s detector alone: %.1f mm / %.1f deg mean over %d detections\n", name.c_str(),
                     1e3 * det.at(name).first, det.at(name).second * 180 / M_PI, det_counts[name]);
+    if (last_truth > first_truth)
+      std::printf("refined frames per second: %.1f (%d frames refined over %.1f s of bag time)\n",
+                  refined_frames / (last_truth - first_truth), refined_frames, last_truth - first_truth);
     double latency = 0;
     for (const auto& r : checker->rows()) latency += r.latency;
     if (!checker->rows().empty())

@@ -61,6 +61,39 @@ TEST(Refiner, RecoversHardPerturbation) {
   EXPECT_DOUBLE_EQ(r.loss.total, *std::min_element(r.run_losses.begin(), r.run_losses.end()));
 }
 
+// Coarse to fine (the default) recovers what a single scale recovers; the reported losses are at the fine scale
+// (initial loss = the fine evaluation of the start; the winner's loss = the fine evaluation of its pose) and an
+// early stop in the coarse phase moves on to the fine one instead of ending the run there.
+TEST(Refiner, CoarseToFineEndsAtTheFineScale) {
+  const Scene s = make_scene(4);
+  std::mt19937_64 rng(9);
+  const Pose init = perturb_pose(s.truth, s.mesh.center(), 20 * M_PI / 180, 0.015, rng);
+  RefinerOptions one = test_options(), c2f = test_options();
+  one.coarse_fraction = 0;
+  ASSERT_GT(c2f.coarse_fraction, 0.0);
+  const RefineResult a = Refiner(one).refine(s.cam, s.obs, s.mesh, init);
+  const RefineResult b = Refiner(c2f).refine(s.cam, s.obs, s.mesh, init);
+  EXPECT_LT(add_mm(s, a.pose), 3.0);
+  EXPECT_LT(add_mm(s, b.pose), 3.0);
+  EXPECT_EQ(b.history.size(), 61u);
+  auto r = make_cpu_renderer();
+  std::vector<LossValue> v;
+  r->evaluate(s.cam, s.mesh, s.obs, {init, b.pose}, c2f.loss, false, v);
+  EXPECT_NEAR(b.initial_loss, v[0].total, 1e-6 * v[0].total);
+  EXPECT_NEAR(b.loss.total, v[1].total, 1e-6 * v[1].total);
+  EXPECT_NEAR(a.initial_loss, b.initial_loss, 1e-9 * a.initial_loss);
+  // Early stop: the coarse phase may stall, the fine phase still runs and its values are reported.
+  RefinerOptions stop = c2f;
+  stop.iterations = 200;
+  stop.early_stop_patience = 3;
+  stop.early_stop_tolerance = 0.5;
+  const RefineResult c = Refiner(stop).refine(s.cam, s.obs, s.mesh, init);
+  EXPECT_LT(c.iterations, 200);
+  EXPECT_GE(c.iterations, 2 * stop.early_stop_patience);  // a stall in each phase
+  r->evaluate(s.cam, s.mesh, s.obs, {c.pose}, c2f.loss, false, v);
+  EXPECT_NEAR(c.loss.total, v[0].total, 1e-6 * v[0].total);
+}
+
 TEST(Refiner, SeveralStartsTheBetterOneWins) {
   // A good start (a tracked pose) and a hopeless one (a wrong detection, 90 deg off): whichever order they
   // come in, the winner comes from the good one and RefineResult says so.
