@@ -9,16 +9,19 @@
 namespace diffdope {
 
 namespace detail {
-/// Barycentrics used for shading (raw or clamped) plus what the backward pass needs.
+/// Barycentrics used for shading (raw or clamped) plus what the backward pass needs: the texture's derivatives
+/// at the sampled UV (kept by the forward pass, so the backward pass does not sample the texture again).
 struct ShadeBary {
   float raw[3], b[3], s;
   bool clamped;
+  Vec3f dcdu, dcdv;
 };
 DD_HOST_DEVICE ShadeBary shade_barycentrics(Vec3f d, const Vec3f X[3], bool clamp) {
   ShadeBary r;
   r.s = ray_barycentrics(d, X[0], X[1], X[2], r.raw);
   r.clamped = clamp && (r.raw[0] < 0.f || r.raw[1] < 0.f || r.raw[2] < 0.f) && clamp_barycentrics(r.raw, r.b);
   if (!r.clamped) r.b[0] = r.raw[0], r.b[1] = r.raw[1], r.b[2] = r.raw[2];
+  r.dcdu = r.dcdv = Vec3f{0.f, 0.f, 0.f};
   return r;
 }
 }  // namespace detail
@@ -30,15 +33,17 @@ DD_HOST_DEVICE void shade_pixel(const MeshView& M, const ProjectedView& G, const
                                 detail::ShadeBary* bary_out = nullptr) {
   const int* v = M.triangles + 3 * tri;
   const Vec3f X[3] = {G.cam[v[0]], G.cam[v[1]], G.cam[v[2]]};
-  const detail::ShadeBary sb = detail::shade_barycentrics(pixel_ray(K, px, py), X, clamp);
-  if (bary_out) *bary_out = sb;
+  detail::ShadeBary sb = detail::shade_barycentrics(pixel_ray(K, px, py), X, clamp);
   const float* b = sb.b;
   *depth = b[0] * X[0].z + b[1] * X[1].z + b[2] * X[2].z;
   const int tex = M.tri_texture[tri];
   if (tex >= 0 && M.uvs) {
     const Vec2f uv = b[0] * M.uvs[v[0]] + b[1] * M.uvs[v[1]] + b[2] * M.uvs[v[2]];
-    *colour = sample_trilinear(M.textures[tex], G.tri_level[tri], uv, nullptr, nullptr);
+    *colour = sample_trilinear(M.textures[tex], G.tri_level[tri], uv, bary_out ? &sb.dcdu : nullptr,
+                               bary_out ? &sb.dcdv : nullptr);
+    if (bary_out) *bary_out = sb;
   } else {
+    if (bary_out) *bary_out = sb;
     *colour = b[0] * M.colors[v[0]] + b[1] * M.colors[v[1]] + b[2] * M.colors[v[2]];
   }
 }
@@ -59,9 +64,11 @@ DD_HOST_DEVICE void shade_pixel_backward(const MeshView& M, const ProjectedView&
   Vec3f g_X[3] = {{0.f, 0.f, g_depth * b[0]}, {0.f, 0.f, g_depth * b[1]}, {0.f, 0.f, g_depth * b[2]}};
   const int tex = M.tri_texture[tri];
   if (tex >= 0 && M.uvs) {
-    const Vec2f uv = b[0] * M.uvs[v[0]] + b[1] * M.uvs[v[1]] + b[2] * M.uvs[v[2]];
-    Vec3f dcdu, dcdv;
-    sample_trilinear(M.textures[tex], G.tri_level[tri], uv, &dcdu, &dcdv);
+    Vec3f dcdu = sb.dcdu, dcdv = sb.dcdv;
+    if (!bary) {
+      const Vec2f uv = b[0] * M.uvs[v[0]] + b[1] * M.uvs[v[1]] + b[2] * M.uvs[v[2]];
+      sample_trilinear(M.textures[tex], G.tri_level[tri], uv, &dcdu, &dcdv);
+    }
     const float gu = dot(g_colour, dcdu), gv = dot(g_colour, dcdv);
     for (int i = 0; i < 3; ++i) g_b[i] = gu * M.uvs[v[i]].x + gv * M.uvs[v[i]].y + g_depth * X[i].z;
   } else {
