@@ -34,8 +34,11 @@ class PoseChecker {
     double mean_initial_translation_m = 0, mean_initial_rotation_rad = 0;
   };
 
-  PoseChecker(double max_translation_m, double max_rotation_rad, std::map<std::string, bool> symmetric = {})
-      : max_t_(max_translation_m), max_r_(max_rotation_rad), symmetric_(std::move(symmetric)) {}
+  /// `max_rotation_by_object` (radians) replaces max_rotation_rad for the objects it names.
+  PoseChecker(double max_translation_m, double max_rotation_rad, std::map<std::string, bool> symmetric = {},
+              std::map<std::string, double> max_rotation_by_object = {})
+      : max_t_(max_translation_m), max_r_(max_rotation_rad), symmetric_(std::move(symmetric)),
+        max_r_by_object_(std::move(max_rotation_by_object)) {}
 
   void addGroundTruth(const InitialPoseArray& truth);
   /// Returns the rows this message could be matched with ground truth (also kept for summary()).
@@ -45,12 +48,16 @@ class PoseChecker {
 
   const std::vector<Row>& rows() const { return rows_; }
   std::map<std::string, ObjectSummary> summary() const;
-  bool within(const Row& r) const { return r.refined.translation_m <= max_t_ && r.refined.rotation_rad <= max_r_; }
+  bool within(const Row& r) const {
+    const auto it = max_r_by_object_.find(r.name);
+    return r.refined.translation_m <= max_t_ && r.refined.rotation_rad <= (it == max_r_by_object_.end() ? max_r_ : it->second);
+  }
   static std::string formatRow(const Row& r);
 
  private:
   double max_t_, max_r_;
   std::map<std::string, bool> symmetric_;
+  std::map<std::string, double> max_r_by_object_;
   std::map<std::pair<int64_t, std::string>, diffdope::Pose> truth_;
   std::vector<Row> rows_;
   int unmatched_ = 0;

@@ -6,8 +6,8 @@
 //                     [--rot-noise-deg D] [--trans-noise-m M] [--compression none|lz4|bz2]
 //
 // DIR/demo.bag, DIR/meshes/<name>.ply (+ <name>.png texture; metres), DIR/objects.yaml (object_config.hpp).
-// Objects: bottle and mug (scan-like meshes: 15k triangles, UV atlas, 2048^2 print) and box (a low-poly printed
-// box; labels 1, 2, 3 in the mask in the order bottle, box, mug), side by side about 0.6 m in
+// Objects: a scan-like bottle alone (--objects 1), or a low-poly printed box, the bottle and a scan-like mug (labels
+// 1, 2, 3 in the mask; scan-like: 15k triangles, UV atlas, 2048^2 print), side by side about 0.6 m in
 // front of the camera, each turning slowly (~15 deg/s) about its own axis through its centre and drifting (~2 cm/s,
 // a smooth back-and-forth of 3 cm amplitude so long bags stay in view). Frames are composed with
 // synthesize_scene; the background (and the sensor noise pattern) is the same in every frame, as for a static
@@ -304,16 +304,19 @@ int main(int argc, char** argv) {
     fs::create_directories(out_dir / "meshes", ec);
     if (ec) throw std::runtime_error((out_dir / "meshes").string() + ": cannot create: " + ec.message());
 
-    // Objects, in the fixed order bottle, box, mug: scan-like meshes as users have them (15k triangles, UV atlas,
-    // 2048^2 print) and a low-poly printed box.
+    // Objects: scan-like meshes as users have them (15k triangles, UV atlas, 2048^2 print) and a low-poly printed
+    // box. One object: the bottle; more: the box (label 1, at the side), the bottle (2) and the mug (3).
     std::vector<DemoObject> objects;
-    objects.push_back({"bottle", make_scan_like(ScanShape::Bottle, Eigen::Vector3d(0.065, 0.04, 0.17), 15000, 2048, 11),
-                       false, 1});
-    if (args.objects >= 2)
-      objects.push_back({"box", make_box(Eigen::Vector3d(0.10, 0.05, 0.14), make_label_texture(512, 12)), false, 2});
-    if (args.objects >= 3)
-      objects.push_back({"mug", make_scan_like(ScanShape::Mug, Eigen::Vector3d(0.11, 0.08, 0.095), 15000, 2048, 13),
-                         false, 3});
+    const auto bottle = [] { return make_scan_like(ScanShape::Bottle, Eigen::Vector3d(0.065, 0.04, 0.17), 15000, 2048, 11); };
+    if (args.objects == 1) {
+      objects.push_back({"bottle", bottle(), false, 1});
+    } else {
+      objects.push_back({"box", make_box(Eigen::Vector3d(0.10, 0.05, 0.14), make_label_texture(512, 11)), false, 1});
+      objects.push_back({"bottle", bottle(), false, 2});
+      if (args.objects >= 3)
+        objects.push_back({"mug", make_scan_like(ScanShape::Mug, Eigen::Vector3d(0.11, 0.08, 0.095), 15000, 2048, 13),
+                           false, 3});
+    }
     const size_t n = objects.size();
 
     std::ostringstream yaml;

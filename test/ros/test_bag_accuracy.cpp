@@ -60,7 +60,8 @@ struct Recorder {
   }
 };
 
-// Parameters (private): max_translation (m, 0.005), max_rotation_deg (2), expect_track (true: some frames must
+// Parameters (private): max_translation (m, 0.005), max_rotation_deg (2), max_rotation_deg_by_object ({name: deg}
+// for the objects it names), expect_track (true: some frames must
 // be seeded by tracking once the detector is silent), check_outputs (true: overlay, markers, diagnostics).
 TEST(BagAccuracy, RefinedPosesTfAndScores) {
   ros::NodeHandle nh, pnh("~");
@@ -78,7 +79,12 @@ TEST(BagAccuracy, RefinedPosesTfAndScores) {
   std::map<std::string, bool> symmetric;
   for (const auto& o : cfg.objects) symmetric[o.name] = o.symmetric;
   Recorder rec;
-  rec.checker = std::make_unique<diffdope_ros::PoseChecker>(max_t, max_r * M_PI / 180, symmetric);
+  // Per-object rotation limits (degrees), e.g. for a slender object whose roll about its long axis only the
+  // print decides: {bottle: 5}.
+  std::map<std::string, double> max_r_by_object;
+  pnh.getParam("max_rotation_deg_by_object", max_r_by_object);
+  for (auto& [name, deg] : max_r_by_object) deg *= M_PI / 180;
+  rec.checker = std::make_unique<diffdope_ros::PoseChecker>(max_t, max_r * M_PI / 180, symmetric, max_r_by_object);
   tf2_ros::Buffer tf_buffer(ros::Duration(120));
   tf2_ros::TransformListener tf_listener(tf_buffer);
   auto truth_sub = nh.subscribe("/ground_truth", 100, &Recorder::onTruth, &rec);
@@ -153,7 +159,9 @@ TEST(BagAccuracy, RefinedPosesTfAndScores) {
     for (const auto& p : a.poses) {
       SCOPED_TRACE(p.name);
       if (has_mask) {
-        EXPECT_GT(p.mask_iou, 0.8);
+        // Against the visible mask: the bag's layout keeps every object at least 75 % visible, so the IoU of the
+        // right pose's full silhouette with it is at least ~0.75.
+        EXPECT_GT(p.mask_iou, 0.7);
         EXPECT_LE(p.mask_iou, 1.0);
       } else {
         EXPECT_EQ(p.mask_iou, -1.0);

@@ -69,6 +69,9 @@ DD_HOST_DEVICE bool discontinuity_blend(const MeshView& M, const ProjectedView& 
     if (is_fold(s[k], s[(k + 1) % 3], s[(k + 2) % 3], G.pix[M.opposite[3 * C + k]])) break;  // contour
     // A colour seam is blended by the pair direction it faces; otherwise the walk goes on across it.
     if (M.seams[3 * C + k] && edge_matches_pair_direction(s[k], s[(k + 1) % 3], horizontal)) break;
+    // The walk reached the triangle o's centre lies in (the common case of two pixels on adjacent triangles of
+    // one smooth surface): nothing between them to blend, without walking that triangle too.
+    if (N == (a_front ? tri_b : tri_a)) return false;
     C = N;
   }
   if (!edge_matches_pair_direction(s[k], s[(k + 1) % 3], horizontal)) return false;
