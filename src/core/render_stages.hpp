@@ -206,16 +206,27 @@ struct RasterStage {
   }
 };
 
-/// i: pixel. Visible triangle and shading (barycentrics kept for the backward pass); post starts as pre.
-struct ShadeStage {
-  static constexpr const char* kName = "shade";
+/// What every stage over the pixels of the regions shares: element i of hypothesis h is pixel (i % w, i / w) of
+/// its region. The CUDA kernels call operator(), which splits i; the CPU executor walks the rows and calls
+/// Stage::pixel(lx, ly, i, h[, v]) directly (no division per pixel).
+template <class Stage>
+struct PixelStage {
   Pipeline p;
+  static constexpr bool kPixels = true;
   DD_HOST_DEVICE int count(int h) const { return p.H[h].w * p.H[h].h; }
-  static constexpr bool kPixels = true;  // pixel(lx, ly, i, h): the host executor walks rows, no division
   DD_HOST_DEVICE void operator()(int i, int h) const {
     const int w = p.H[h].w;
-    pixel(i % w, i / w, i, h);
+    static_cast<const Stage&>(*this).pixel(i % w, i / w, i, h);
   }
+  DD_HOST_DEVICE void operator()(int i, int h, double* v) const {
+    const int w = p.H[h].w;
+    static_cast<const Stage&>(*this).pixel(i % w, i / w, i, h, v);
+  }
+};
+
+/// i: pixel. Visible triangle and shading (barycentrics kept for the backward pass); post starts as pre.
+struct ShadeStage : PixelStage<ShadeStage> {
+  static constexpr const char* kName = "shade";
   DD_HOST_DEVICE void pixel(int lx, int ly, int i, int h) const {
     const Hypothesis& hy = p.H[h];
     if (i >= hy.w * hy.h) return;
@@ -238,15 +249,8 @@ struct ShadeStage {
 
 /// i: pixel. The discontinuity between the pixel and its right (dir 0) / lower (dir 1) neighbour, if any, into
 /// slot 2 * pixel + dir; `to` is a packed-buffer index.
-struct BlendDetectStage {
+struct BlendDetectStage : PixelStage<BlendDetectStage> {
   static constexpr const char* kName = "blend detect";
-  Pipeline p;
-  DD_HOST_DEVICE int count(int h) const { return p.H[h].w * p.H[h].h; }
-  static constexpr bool kPixels = true;  // pixel(lx, ly, i, h): the host executor walks rows, no division
-  DD_HOST_DEVICE void operator()(int i, int h) const {
-    const int w = p.H[h].w;
-    pixel(i % w, i / w, i, h);
-  }
   DD_HOST_DEVICE void pixel(int lx, int ly, int i, int h) const {
     const Hypothesis& hy = p.H[h];
     if (i >= hy.w * hy.h) return;
@@ -283,15 +287,8 @@ DD_HOST_DEVICE int event_slots(const Hypothesis& hy, int lx, int ly, int q, int 
 }
 
 /// i: pixel. Applies the blends that reach it.
-struct BlendApplyStage {
+struct BlendApplyStage : PixelStage<BlendApplyStage> {
   static constexpr const char* kName = "blend apply";
-  Pipeline p;
-  DD_HOST_DEVICE int count(int h) const { return p.H[h].w * p.H[h].h; }
-  static constexpr bool kPixels = true;  // pixel(lx, ly, i, h): the host executor walks rows, no division
-  DD_HOST_DEVICE void operator()(int i, int h) const {
-    const int w = p.H[h].w;
-    pixel(i % w, i / w, i, h);
-  }
   DD_HOST_DEVICE void pixel(int lx, int ly, int i, int h) const {
     const Hypothesis& hy = p.H[h];
     if (i >= hy.w * hy.h) return;
@@ -306,15 +303,8 @@ struct BlendApplyStage {
 };
 
 /// i: pixel; reduced per hypothesis into (rgb, depth, mask). Also dL/d(post) when with_gradient.
-struct LossStage {
+struct LossStage : PixelStage<LossStage> {
   static constexpr const char* kName = "loss";
-  Pipeline p;
-  DD_HOST_DEVICE int count(int h) const { return p.H[h].w * p.H[h].h; }
-  static constexpr bool kPixels = true;  // pixel(lx, ly, i, h): the host executor walks rows, no division
-  DD_HOST_DEVICE void operator()(int i, int h, double* v) const {
-    const int w = p.H[h].w;
-    pixel(i % w, i / w, i, h, v);
-  }
   static constexpr int kValues = 3;
   DD_HOST_DEVICE void pixel(int lx, int ly, int i, int h, double* v) const {
     const Hypothesis& hy = p.H[h];
@@ -349,15 +339,8 @@ struct GreyStage {
 
 /// Edge term, stage 2, i: pixel; reduced per hypothesis. |observed edges - rendered Sobel edges| over S, and
 /// dL/d(Sobel responses) when with_gradient.
-struct EdgeStage {
+struct EdgeStage : PixelStage<EdgeStage> {
   static constexpr const char* kName = "edges sobel";
-  Pipeline p;
-  DD_HOST_DEVICE int count(int h) const { return p.H[h].w * p.H[h].h; }
-  static constexpr bool kPixels = true;  // pixel(lx, ly, i, h): the host executor walks rows, no division
-  DD_HOST_DEVICE void operator()(int i, int h, double* v) const {
-    const int w = p.H[h].w;
-    pixel(i % w, i / w, i, h, v);
-  }
   static constexpr int kValues = 1;
   DD_HOST_DEVICE void pixel(int lx, int ly, int i, int h, double* v) const {
     const Hypothesis& hy = p.H[h];
@@ -372,15 +355,8 @@ struct EdgeStage {
 };
 
 /// Edge term, stage 3, i: pixel. Gathers the Sobel gradients into the pixel's colour gradient.
-struct EdgeGatherStage {
+struct EdgeGatherStage : PixelStage<EdgeGatherStage> {
   static constexpr const char* kName = "edges gather";
-  Pipeline p;
-  DD_HOST_DEVICE int count(int h) const { return p.H[h].w * p.H[h].h; }
-  static constexpr bool kPixels = true;  // pixel(lx, ly, i, h): the host executor walks rows, no division
-  DD_HOST_DEVICE void operator()(int i, int h) const {
-    const int w = p.H[h].w;
-    pixel(i % w, i / w, i, h);
-  }
   DD_HOST_DEVICE void pixel(int lx, int ly, int i, int h) const {
     const Hypothesis& hy = p.H[h];
     if (i >= hy.w * hy.h || !hy.valid || p.objects[hy.object].k_edges == 0.f) return;
@@ -391,15 +367,8 @@ struct EdgeGatherStage {
 
 /// Backward, i: pixel; reduced per hypothesis into the 6-D pose gradient. The blends that reached the pixel
 /// (into its pre-blend gradient and the silhouette gradient), then its shading.
-struct BackwardStage {
+struct BackwardStage : PixelStage<BackwardStage> {
   static constexpr const char* kName = "backward";
-  Pipeline p;
-  DD_HOST_DEVICE int count(int h) const { return p.H[h].w * p.H[h].h; }
-  static constexpr bool kPixels = true;  // pixel(lx, ly, i, h): the host executor walks rows, no division
-  DD_HOST_DEVICE void operator()(int i, int h, double* g6) const {
-    const int w = p.H[h].w;
-    pixel(i % w, i / w, i, h, g6);
-  }
   static constexpr int kValues = 6;
   DD_HOST_DEVICE void pixel(int lx, int ly, int i, int h, double* g6) const {
     const Hypothesis& hy = p.H[h];

@@ -1,7 +1,7 @@
 // pose_checker_node: the demo's judge. Prints, per refined object and frame, the initial (detector / track)
 // and refined errors against the bag's ground truth, then a summary once the refiner has been quiet for
 // ~idle_timeout seconds (wall time: the bag's clock stops when it ends), and exits (0 = every object refined
-// and every refined pose within ~max_translation / ~max_rotation_deg).
+// and every refined pose within ~max_translation / ~max_rotation_deg, or ~max_rotation_deg_by_object[name]).
 #include <geometry_msgs/PoseStamped.h>
 #include <ros/ros.h>
 #include <tf2_ros/buffer.h>
@@ -145,8 +145,12 @@ int main(int argc, char** argv) {
     ROS_FATAL("pose_checker: %s", e.what());
     return 2;
   }
+  std::map<std::string, double> max_r_by_object;  // ~max_rotation_deg_by_object: {name: degrees}
+  pnh.getParam("max_rotation_deg_by_object", max_r_by_object);
+  for (auto& [name, deg] : max_r_by_object) deg *= M_PI / 180;
   node.checker = std::make_unique<diffdope_ros::PoseChecker>(
-      pnh.param("max_translation", 0.005), pnh.param("max_rotation_deg", 2.0) * M_PI / 180, symmetric);
+      pnh.param("max_translation", 0.005), pnh.param("max_rotation_deg", 2.0) * M_PI / 180, symmetric,
+      max_r_by_object);
   node.idle_timeout = pnh.param("idle_timeout", 5.0);
   node.start_timeout = pnh.param("start_timeout", 120.0);
   auto truth_sub = nh.subscribe("ground_truth", 100, &CheckerNode::onTruth, &node);
