@@ -51,8 +51,10 @@ namespace {
 Camera scaled_camera(const Camera& camera, double scale) { return scale == 1.0 ? camera : camera.scaled(scale); }
 
 /// Iterations run at the coarse scale (RefinerOptions::coarse_fraction).
+/// At least one fine step always follows (the last iteration only evaluates).
 int coarse_iterations(const RefinerOptions& o) {
-  return o.coarse_scale < 1.0 ? int(std::lround(o.coarse_fraction * o.iterations)) : 0;
+  if (!(o.coarse_scale < 1.0) || o.iterations < 2) return 0;
+  return std::min(int(std::floor(o.coarse_fraction * o.iterations)), o.iterations - 1);
 }
 
 /// The frame's rgb / depth at `scale`, with the paper's edge map when the loss uses it.
@@ -176,7 +178,10 @@ RefineRun::RefineRun(const RefinerOptions& o, const Camera& camera, const Observ
 const std::vector<Pose>& RefineRun::batch() {
   const int iters = options_.iterations;
   const bool last = k_ == iters;
-  if (options_.successive_halving && k_ > 0 && !last && active_.size() > 1 && (k_ == iters / 4 || k_ == iters / 2)) {
+  // Halvings are due at 25 % and 50 % of the iterations (">=": a stalled coarse phase may jump over them).
+  const int due = int(iters / 4 > 0 && k_ >= iters / 4) + int(iters / 2 > 0 && k_ >= iters / 2);
+  for (; options_.successive_halving && !last && halvings_ < due; ++halvings_) {
+    if (active_.size() <= 1) continue;
     std::stable_sort(active_.begin(), active_.end(), [&](int a, int b) { return best_[a].total < best_[b].total; });
     active_.resize((active_.size() + 1) / 2);
     std::sort(active_.begin(), active_.end());
@@ -252,8 +257,9 @@ RefineResult RefineRun::finish(Renderer& renderer) {
   const Camera& cam = fine_.cam;
   const Observation& obs = fine_.obs;
   if (switch_at_ > 0) {  // the first iteration was at the coarse scale: the initial loss at the fine one
-    std::vector<LossValue> v;
-    renderer.evaluate(cam, mesh_, obs, initials_, loss_, false, v);
+    std::vector<LossValue> v;  // of the starts that got a run, as at k = 0
+    const std::vector<Pose> started(initials_.begin(), initials_.begin() + std::min(starts, B));
+    renderer.evaluate(cam, mesh_, obs, started, loss_, false, v);
     res.initial_loss = std::min_element(v.begin(), v.end(), [](auto& a, auto& b) { return a.total < b.total; })->total;
   }
   // Quality scores at the refined pose.

@@ -165,16 +165,21 @@ class PipelineRenderer final : public Renderer {
     ++uses_;
     // Keyed by the content id finalize() gives (an address can be reused by another mesh; a copy shares the
     // content and the id). The counts guard against a mesh resized after finalize() without a new one.
-    auto& slot = meshes_[mesh.content_id()];
-    if (slot && slot->views[0].num_vertices == mesh.num_vertices() &&
-        slot->views[0].num_triangles == mesh.num_triangles() && slot->views.size() == mesh.lods().size() + 1) {
-      slot->used = uses_;
-      return *slot;
+    const auto cached = meshes_.find(mesh.content_id());
+    if (cached != meshes_.end()) {
+      ExecMesh& m = *cached->second;
+      if (m.views[0].num_vertices == mesh.num_vertices() && m.views[0].num_triangles == mesh.num_triangles() &&
+          m.views.size() == mesh.lods().size() + 1) {
+        m.used = uses_;
+        return m;
+      }
+      meshes_.erase(cached);
     }
-    slot = std::make_unique<ExecMesh>();
-    ExecMesh& d = *slot;
+    // Built aside and put in the cache only once complete: a failed upload (out of device memory) must not
+    // leave a half-made entry behind.
+    auto made = std::make_unique<ExecMesh>();
+    ExecMesh& d = *made;
     d.used = uses_;
-    evict_meshes();
     std::vector<TextureView> host_views;
     mesh.view(host_views);
     std::vector<TextureView> exec_views = host_views;
@@ -214,7 +219,10 @@ class PipelineRenderer final : public Renderer {
       d.views.push_back(v);
     }
     exec_.synchronize("mesh upload");  // host_views / exec_views are about to go away
-    return d;
+    auto& entry = meshes_[mesh.content_id()];
+    entry = std::move(made);
+    evict_meshes();
+    return *entry;
   }
 
   /// The level of detail to draw `mesh` at for these poses: the coarsest whose error projects to at most

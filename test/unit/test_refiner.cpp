@@ -90,6 +90,10 @@ TEST(Refiner, CoarseToFineEndsAtTheFineScale) {
   const RefineResult c = Refiner(stop).refine(s.cam, s.obs, s.mesh, init);
   EXPECT_LT(c.iterations, 200);
   EXPECT_GE(c.iterations, 2 * stop.early_stop_patience);  // a stall in each phase
+  // The stall jumped over 25 % and 50 % of the iterations: both halvings still happened (16 -> 8 -> 4 runs).
+  size_t longest = 0;
+  for (const auto& h : c.run_histories) longest = std::max(longest, h.size());
+  EXPECT_EQ(std::count_if(c.run_histories.begin(), c.run_histories.end(), [&](auto& h) { return h.size() == longest; }), 4);
   r->evaluate(s.cam, s.mesh, s.obs, {c.pose}, c2f.loss, false, v);
   EXPECT_NEAR(c.loss.total, v[0].total, 1e-6 * v[0].total);
 }
