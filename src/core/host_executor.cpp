@@ -96,14 +96,10 @@ class HostExec {
  private:
   /// Stages over the pixels of a region (kPixels) are walked row by row: no division per pixel.
   template <class Stage>
-  static constexpr bool per_pixel() {
-    return pipeline::is_pixel_stage<Stage>::value;
-  }
-  template <class Stage>
   static void step(const pipeline::Each<Stage>& s, int h) {
     const int n = std::min(s.n, s.stage.count(h));
     if (n <= 0) return;
-    if constexpr (per_pixel<Stage>()) {
+    if constexpr (pipeline::is_pixel_stage<Stage>::value) {
       const int w = s.stage.p.H[h].w, rows = n / w;
       for (int ly = 0, i = 0; ly < rows; ++ly)
         for (int lx = 0; lx < w; ++lx, ++i) s.stage.pixel(lx, ly, i, h);
@@ -113,6 +109,7 @@ class HostExec {
   }
   template <class Stage>
   static void step(const pipeline::Sum<Stage>& s, int h) {
+    static_assert(pipeline::is_pixel_stage<Stage>::value, "reducing stages run over the pixels of the regions");
     const int n = std::min(s.n, s.stage.count(h));
     if (n <= 0) return;
     double sum[Stage::kValues] = {};

@@ -142,7 +142,7 @@ class PipelineRenderer final : public Renderer {
   };
 
   /// One level of detail of a mesh on the executor.
-  struct ExecTriangles {
+  struct ExecLevel {
     typename Exec::template Buffer<Vec3f> positions, colors;
     typename Exec::template Buffer<Vec2f> uvs;
     typename Exec::template Buffer<int> triangles, tri_texture, neighbors, opposite;
@@ -151,7 +151,7 @@ class PipelineRenderer final : public Renderer {
   };
   /// A mesh's levels of detail (Mesh::lods()) and textures on the executor.
   struct ExecMesh {
-    std::vector<std::unique_ptr<ExecTriangles>> levels;  // 0: the full mesh
+    std::vector<std::unique_ptr<ExecLevel>> levels;  // 0: the full mesh
     std::vector<MeshView> views;                         // per level
     std::vector<std::unique_ptr<typename Exec::template Buffer<float>>> texels;  // one per texture level
     typename Exec::template Buffer<TextureView> textures;
@@ -194,8 +194,8 @@ class PipelineRenderer final : public Renderer {
     std::vector<TextureView> unused;
     for (size_t level = 0; level <= mesh.lods().size(); ++level) {
       const MeshView l = mesh.view(unused, int(level));
-      d.levels.push_back(std::make_unique<ExecTriangles>());
-      ExecTriangles& t = *d.levels.back();
+      d.levels.push_back(std::make_unique<ExecLevel>());
+      ExecLevel& t = *d.levels.back();
       exec_.upload(t.positions, l.positions, l.num_vertices);
       exec_.upload(t.colors, l.colors, l.num_vertices);
       if (l.uvs) exec_.upload(t.uvs, l.uvs, l.num_vertices);

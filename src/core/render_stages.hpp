@@ -224,7 +224,8 @@ struct PixelStage {
   }
 };
 
-/// i: pixel. Visible triangle and shading (barycentrics kept for the backward pass); post starts as pre.
+/// i: pixel. Visible triangle and shading (barycentrics and texture derivatives kept for the backward pass);
+/// post starts as pre.
 struct ShadeStage : PixelStage<ShadeStage> {
   static constexpr const char* kName = "shade";
   DD_HOST_DEVICE void pixel(int lx, int ly, int i, int h) const {
