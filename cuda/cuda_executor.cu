@@ -133,6 +133,7 @@ class CudaExec {
   }
   void zero(double* p, size_t n) { check(cudaMemsetAsync(p, 0, sizeof(double) * n, stream_), "memset"); }
   static constexpr bool kSplitsTriangles = true;  // big triangles in bands of rows: more threads
+  static constexpr bool kWorkerScratch = false;  // the packed arrays are the device's working memory
   template <class... Steps>
   void run(int B, const Steps&... steps) {
     if (B > 0) (launch(steps, B), ...);

@@ -1,7 +1,9 @@
 // The CPU backend: the render pipeline (src/core/render_pipeline.hpp) executed on host threads. Each hypothesis
-// runs every stage of a call back to back on one thread, so its region's buffers stay in the core's cache
-// between stages; the hypotheses of all objects of the call are spread over the threads. One hypothesis' elements
-// run in order on one thread, which is what makes the plain-memory z-buffer minimum and the sums safe here.
+// runs every stage of a call back to back on one thread; the hypotheses of all objects of the call are spread
+// over the threads. When evaluating, each thread works in its own per-hypothesis arrays, reused from one
+// hypothesis to the next, so they stay in the core's cache between stages and hypotheses (the packed arrays of
+// all hypotheses, tens of MB for B = 32, would stream through memory). One hypothesis' elements run in order
+// on one thread, which is what makes the plain-memory z-buffer minimum and the sums safe here.
 #include <algorithm>
 #include <atomic>
 #include <chrono>
@@ -35,6 +37,7 @@ class HostExec {
   template <class T>
   using Buffer = HostBuffer<T>;
   static constexpr bool kSplitsTriangles = false;  // one thread walks a whole triangle
+  static constexpr bool kWorkerScratch = true;     // evaluate() runs in per-thread arrays (run_in_scratch)
 
   /// RenderOptions::threads (0 = all). DIFFDOPE_STAGE_PROFILE=1 in the environment: time every stage and print
   /// a table to stderr when the renderer goes away (for profiling; ~20 ns per stage and hypothesis).
@@ -63,13 +66,20 @@ class HostExec {
 
   template <class... Steps>
   void run(int B, const Steps&... steps) {
-    if (!profile_) {
-      pool_.parallel_for(B, [&](int h, int) { (step(steps, h), ...); });
-      return;
-    }
     pool_.parallel_for(B, [&](int h, int) {
       int k = 0;
-      (timed(steps, h, k++), ...);
+      (timed(steps, h, h, k++), ...);
+    });
+  }
+  /// As run(), each hypothesis in its thread's own arrays: the steps see it as hypothesis 0 of a pipeline whose
+  /// per-hypothesis arrays are the thread's scratch; sums still land in the real hypothesis' outputs.
+  template <class... Steps>
+  void run_in_scratch(int B, const Steps&... steps) {
+    while (scratch_.size() < size_t(pool_.size())) scratch_.push_back(std::make_unique<Scratch>());
+    pool_.parallel_for(B, [&](int h, int worker) {
+      Scratch& s = *scratch_[size_t(worker)];
+      int k = 0;
+      (timed(rebased(steps, s, h), 0, h, k++), ...);
     });
   }
 
@@ -95,8 +105,50 @@ class HostExec {
 
  private:
   /// Stages over the pixels of a region (kPixels) are walked row by row: no division per pixel.
+  /// One worker's per-hypothesis arrays, grown to the largest hypothesis it has run.
+  struct Scratch {
+    pipeline::Hypothesis hy;  // the hypothesis being run, its offsets zero
+    HostBuffer<Vec3f> cam;
+    HostBuffer<Vec2f> pix;
+    HostBuffer<float> area, level, grey, g_sx, g_sy;
+    HostBuffer<unsigned long long> key;
+    HostBuffer<int> tri;
+    HostBuffer<PixelAttr> pre, post, g_post;
+    HostBuffer<detail::ShadeBary> bary;
+    HostBuffer<BlendEvent> events;
+    HostBuffer<unsigned char> has_event;
+  };
+  /// The step with its pipeline pointing at s for hypothesis h (as hypothesis 0).
+  template <class Step>
+  static Step rebased(const Step& step, Scratch& s, int h) {
+    Step out = step;
+    pipeline::Pipeline& p = out.stage.p;
+    s.hy = p.H[h];
+    s.hy.offset = s.hy.vertex_offset = s.hy.triangle_offset = 0;
+    const pipeline::ObjectParams& o = p.objects[s.hy.object];
+    const size_t nv = size_t(o.nv), nt = size_t(o.nt), n = size_t(s.hy.w) * size_t(s.hy.h);
+    p.H = &s.hy;
+    p.cam = s.cam.reserve(nv);
+    p.pix = s.pix.reserve(nv);
+    p.area = s.area.reserve(nt);
+    p.level = s.level.reserve(nt);
+    p.key = s.key.reserve(n);
+    p.tri = s.tri.reserve(n);
+    p.pre = s.pre.reserve(n);
+    p.post = s.post.reserve(n);
+    p.bary = s.bary.reserve(n);
+    p.events = s.events.reserve(2 * n);
+    p.has_event = s.has_event.reserve(2 * n);
+    p.g_post = s.g_post.reserve(n);
+    p.grey = s.grey.reserve(n);
+    p.g_sx = s.g_sx.reserve(n);
+    p.g_sy = s.g_sy.reserve(n);
+    return out;
+  }
+
+  /// Runs step s for hypothesis h of its pipeline; sums go to hypothesis h_out's outputs.
   template <class Stage>
-  static void step(const pipeline::Each<Stage>& s, int h) {
+  static void step(const pipeline::Each<Stage>& s, int h, int) {
     const int n = std::min(s.n, s.stage.count(h));
     if (n <= 0) return;
     if constexpr (pipeline::is_pixel_stage<Stage>::value) {
@@ -108,7 +160,7 @@ class HostExec {
     }
   }
   template <class Stage>
-  static void step(const pipeline::Sum<Stage>& s, int h) {
+  static void step(const pipeline::Sum<Stage>& s, int h, int h_out) {
     static_assert(pipeline::is_pixel_stage<Stage>::value, "reducing stages run over the pixels of the regions");
     const int n = std::min(s.n, s.stage.count(h));
     if (n <= 0) return;
@@ -120,13 +172,14 @@ class HostExec {
         s.stage.pixel(lx, ly, i, h, v);
         for (int k = 0; k < Stage::kValues; ++k) sum[k] += v[k];
       }
-    for (int k = 0; k < Stage::kValues; ++k) s.out[size_t(s.stride) * h + k] += sum[k];
+    for (int k = 0; k < Stage::kValues; ++k) s.out[size_t(s.stride) * h_out + k] += sum[k];
   }
 
   template <class Step>
-  void timed(const Step& s, int h, int k) {
+  void timed(const Step& s, int h, int h_out, int k) {
+    if (!profile_) return step(s, h, h_out);
     const auto t0 = std::chrono::steady_clock::now();
-    step(s, h);
+    step(s, h, h_out);
     const auto ns = std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now() - t0);
     StageTime& t = times_[size_t(k) % kMaxSteps];
     t.name = decltype(s.stage)::kName;
@@ -142,6 +195,7 @@ class HostExec {
   const bool profile_;
   static constexpr size_t kMaxSteps = 16;
   StageTime times_[kMaxSteps];
+  std::vector<std::unique_ptr<Scratch>> scratch_;  // per worker of pool_
   std::vector<cv::Mat> images_;
   std::vector<double> results_;
 };

@@ -14,6 +14,10 @@
 //                                    Each{stage, n}: stage(i, h) for i < min(n, stage.count(h));
 //                                    Sum{stage, n, out, stride}: out[stride * h + k] += sum over those i of
 //                                    stage(i, h, v)[k], k < Stage::kValues. A step with n = 0 is skipped.
+//   kWorkerScratch                   true: evaluate() calls run_in_scratch(B, steps...) instead, which gives
+//                                    every worker its own per-hypothesis arrays (Pipeline::cam .. g_sy, reused
+//                                    from one hypothesis to the next, so they stay in the core's cache); the
+//                                    pipeline then allocates none of them and reads none back
 //   kSplitsTriangles                 whether big triangles are cut into bands of rows (more threads on a GPU)
 //   synchronize(what)                waits for the queued work; throws naming `what` on an error
 //   drain()                          waits for the queued work, ignoring errors (after a failed call)
@@ -66,7 +70,7 @@ class PipelineRenderer final : public Renderer {
     if (poses.empty()) return {};
     const Drain drain(exec_);
     const PixelRect box = mask_box(observed_mask, camera.width, camera.height, false);
-    const Call c = prepare(camera, {ObjectCall{&mesh, &poses, nullptr, nullptr, box}}, false);
+    const Call c = prepare(camera, {ObjectCall{&mesh, &poses, nullptr, nullptr, box}}, false, true);
     std::apply([&](const auto&... steps) { exec_.run(c.B, steps...); }, forward_steps(c));
     const size_t N = size_t(c.pixels);
     std::vector<PixelAttr> pre(N), post(N);
@@ -254,10 +258,10 @@ class PipelineRenderer final : public Renderer {
     }
   }
 
-  /// Packs every hypothesis of every object (hyp_, regions, offsets) and sizes the buffers for the stages.
-  /// Evaluating (a loss setup per object): S = 1 without a mask and a non-rotation pose gets no work and an
-  /// infinite loss; rendering: only non-finite poses are skipped.
-  Call prepare(const Camera& camera, const std::vector<ObjectCall>& objects, bool evaluating) {
+  /// Packs every hypothesis of every object (hyp_, regions, offsets) and, when `packed`, sizes the buffers for
+  /// the stages. Evaluating (a loss setup per object): S = 1 without a mask and a non-rotation pose gets no work
+  /// and an infinite loss; rendering: only non-finite poses are skipped.
+  Call prepare(const Camera& camera, const std::vector<ObjectCall>& objects, bool evaluating, bool packed) {
     camera.validate();
     call_start_ = uses_ + 1;  // meshes used from here on belong to this call
     Call c{};
@@ -315,17 +319,19 @@ class PipelineRenderer final : public Renderer {
     const size_t N = size_t(pixels);
     exec_.upload(d_hyp_, hyp_.data(), B);
     p.H = d_hyp_.ptr;
-    p.cam = cam_.reserve(size_t(vertices));
-    p.pix = pix_.reserve(size_t(vertices));
-    p.area = area_.reserve(size_t(triangles));
-    p.level = level_.reserve(size_t(triangles));
-    p.key = key_.reserve(N);
-    p.tri = tri_.reserve(N);
-    p.pre = pre_.reserve(N);
-    p.post = post_.reserve(N);
-    p.bary = bary_.reserve(N);
-    p.events = events_.reserve(2 * N);
-    p.has_event = has_event_.reserve(2 * N);
+    if (packed) {
+      p.cam = cam_.reserve(size_t(vertices));
+      p.pix = pix_.reserve(size_t(vertices));
+      p.area = area_.reserve(size_t(triangles));
+      p.level = level_.reserve(size_t(triangles));
+      p.key = key_.reserve(N);
+      p.tri = tri_.reserve(N);
+      p.pre = pre_.reserve(N);
+      p.post = post_.reserve(N);
+      p.bary = bary_.reserve(N);
+      p.events = events_.reserve(2 * N);
+      p.has_event = has_event_.reserve(2 * N);
+    }
 
     for (size_t k = 0; k < objects.size(); ++k) {  // loss constants and masks: evaluation only
       if (!objects[k].setup) continue;
@@ -403,7 +409,8 @@ class PipelineRenderer final : public Renderer {
   /// Forward, loss and (with_gradient) backward for the objects; outs[k] receives object k's values.
   void run(const Camera& camera, const FrameImages& frame, const std::vector<ObjectCall>& objects,
            bool with_gradient, std::vector<LossValue>* const* outs) {
-    Call c = prepare(camera, objects, true);
+    constexpr bool packed = !Exec::kWorkerScratch;
+    Call c = prepare(camera, objects, true, packed);
     Pipeline& p = c.p;
     p.I = frame.I;
     p.D = frame.D;
@@ -414,8 +421,8 @@ class PipelineRenderer final : public Renderer {
     const size_t B = size_t(c.B), N = size_t(c.pixels);
     out_.reserve(10 * B);
     exec_.zero(out_.ptr, 10 * B);
-    if (with_gradient) p.g_post = g_post_.reserve(N);
-    if (edges) {  // the edge term, after the per-pixel terms
+    if (packed && with_gradient) p.g_post = g_post_.reserve(N);
+    if (packed && edges) {  // the edge term, after the per-pixel terms
       p.grey = grey_.reserve(N);
       if (with_gradient) p.g_sx = g_sx_.reserve(N), p.g_sy = g_sy_.reserve(N);
     }
@@ -423,9 +430,16 @@ class PipelineRenderer final : public Renderer {
     // Every stage of the call in one run: on the CPU each hypothesis goes through all of them on one thread.
     std::apply(
         [&](const auto&... forward) {
-          exec_.run(c.B, forward..., Sum<LossStage>{{p}, n, out_.ptr, 4}, Each<GreyStage>{{p}, n_edges},
-                    Sum<EdgeStage>{{p}, n_edges, out_.ptr + 3, 4}, Each<EdgeGatherStage>{{p}, n_edges && n_grad ? n : 0},
-                    Sum<BackwardStage>{{p}, n_grad, out_.ptr + 4 * B, 6});
+          const auto steps = std::make_tuple(
+              forward..., Sum<LossStage>{{p}, n, out_.ptr, 4}, Each<GreyStage>{{p}, n_edges},
+              Sum<EdgeStage>{{p}, n_edges, out_.ptr + 3, 4}, Each<EdgeGatherStage>{{p}, n_edges && n_grad ? n : 0},
+              Sum<BackwardStage>{{p}, n_grad, out_.ptr + 4 * B, 6});
+          std::apply(
+              [&](const auto&... all) {
+                if constexpr (!Exec::kWorkerScratch) exec_.run(c.B, all...);
+                else exec_.run_in_scratch(c.B, all...);
+              },
+              steps);
         },
         forward_steps(c));
     double* host = exec_.results(10 * B);

@@ -232,7 +232,8 @@ TEST_P(Executor, SeveralObjectsInOneCallMatchOneByOne) {
 }
 
 // The CPU executor's evaluate_objects (one parallel loop over every hypothesis of every object) gives exactly what
-// evaluate gives per object.
+// evaluate gives per object. On one thread every hypothesis of every object (meshes and regions of different
+// sizes) reuses the same scratch arrays: nothing of the one before may leak into it.
 TEST(CpuExecutor, SeveralObjectsInOneCallAreEvaluatedAsOneByOne) {
   const Camera cam = test_camera();
   auto cpu = make_reference();
