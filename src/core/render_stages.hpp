@@ -190,9 +190,10 @@ struct RasterStage {
     const int y_first = imax(hy.y0, R.y0), y_last = imin(hy.y0 + hy.h - 1, R.y1);
     const int rows = (y_last - y_first + bands) / bands;  // ceil(rows / bands)
     const int ys = y_first + band * rows, ye = imin(y_last, ys + rows - 1);
-    for (int y = ys; y <= ye; ++y) {
-      long long e[3];
-      raster_edges_at(R, xs, y, e);
+    long long e_row[3];  // the edge functions at (xs, y), stepped exactly from row to row
+    raster_edges_at(R, xs, ys, e_row);
+    for (int y = ys; y <= ye; ++y, e_row[0] += R.dy[0], e_row[1] += R.dy[1], e_row[2] += R.dy[2]) {
+      long long e[3] = {e_row[0], e_row[1], e_row[2]};
       int lo = xs, hi = xe;
       if (!raster_row_span(R, xs, e, &lo, &hi)) continue;
       for (int x = lo; x <= hi; ++x, e[0] += R.dx[0], e[1] += R.dx[1], e[2] += R.dx[2]) {

@@ -46,11 +46,30 @@ struct TriangleRaster {
   FixedPoint2 f[3];     // vertices in fixed point
   long long orient;     // sign of the fixed-point area
   long long dx[3];      // change of edge function k per pixel step in x (fixed-point units)
+  long long dy[3];      // ... and per pixel step in y
   bool top_left[3];     // fill rule of edge k (v_k -> v_k+1)
   float inv2a;          // 1 / |2 area| (fixed-point units)
   float iz[3];          // 1/z of the vertex edge k weighs (edge k weighs vertex k+2): depth is linear in 1/z
   int x0, x1, y0, y1;   // pixel bounding box (inclusive, not clipped to the image)
 };
+
+/// floor / ceil of a finite pixel coordinate as an int, clamped to +-2^30 (far outside any image). On the host
+/// without SSE4.1 (the portable default build) floorf / ceilf are slow sequences: a truncation and a fix-up
+/// compare give the same integers.
+DD_HOST_DEVICE float clamp_coordinate(float x) {
+  const float lim = 1073741824.f;
+  return x < -lim ? -lim : (x > lim ? lim : x);
+}
+DD_HOST_DEVICE int floor_to_int(float x) {
+  x = clamp_coordinate(x);
+  const int i = static_cast<int>(x);  // truncates towards zero
+  return i - (static_cast<float>(i) > x ? 1 : 0);
+}
+DD_HOST_DEVICE int ceil_to_int(float x) {
+  x = clamp_coordinate(x);
+  const int i = static_cast<int>(x);
+  return i + (static_cast<float>(i) < x ? 1 : 0);
+}
 
 /// Pixel bounding box (inclusive) of the pixel centres the triangle can cover; empty (x0 > x1 or y0 > y1) for a
 /// triangle between pixel centres, which a dense mesh far away mostly has: those skip the fixed-point set-up.
@@ -58,10 +77,10 @@ struct TriangleRaster {
 DD_HOST_DEVICE void raster_bounds(const Vec2f s[3], int* x0, int* x1, int* y0, int* y1) {
   const float lx = s[0].x < s[1].x ? s[0].x : s[1].x, hx = s[0].x > s[1].x ? s[0].x : s[1].x;
   const float ly = s[0].y < s[1].y ? s[0].y : s[1].y, hy = s[0].y > s[1].y ? s[0].y : s[1].y;
-  *x0 = static_cast<int>(ceilf(lx < s[2].x ? lx : s[2].x));
-  *x1 = static_cast<int>(floorf(hx > s[2].x ? hx : s[2].x));
-  *y0 = static_cast<int>(ceilf(ly < s[2].y ? ly : s[2].y));
-  *y1 = static_cast<int>(floorf(hy > s[2].y ? hy : s[2].y));
+  *x0 = ceil_to_int(lx < s[2].x ? lx : s[2].x);
+  *x1 = floor_to_int(hx > s[2].x ? hx : s[2].x);
+  *y0 = ceil_to_int(ly < s[2].y ? ly : s[2].y);
+  *y1 = floor_to_int(hy > s[2].y ? hy : s[2].y);
 }
 
 /// s: pixel positions, z: camera depths of the three vertices. False when the triangle has no fixed-point area.
@@ -78,6 +97,7 @@ DD_HOST_DEVICE bool triangle_raster_setup(const Vec2f s[3], const float z[3], Tr
   for (int k = 0; k < 3; ++k) {
     r->top_left[k] = edge_is_top_left_fixed(r->f[k], r->f[(k + 1) % 3], r->orient);
     r->dx[k] = -r->orient * (r->f[(k + 1) % 3].y - r->f[k].y) * kOne;
+    r->dy[k] = r->orient * (r->f[(k + 1) % 3].x - r->f[k].x) * kOne;
   }
   raster_bounds(s, &r->x0, &r->x1, &r->y0, &r->y1);
   return true;

@@ -32,15 +32,17 @@ struct BlendEvent {
   Vec2f pf, po;     // pixel centres: near-side pixel and its neighbour (the crossing is on pf -> po)
   Vec2f p_to;       // centre of pixel `to`
   PixelAttr from;   // blended-in attributes (forward value, kept for the backward pass)
+  detail::ShadeBary src_bary;  // src_tri's barycentrics and texture derivatives at p_to (for the backward pass)
 };
 
-/// Attributes of triangle `tri` at pixel centre p, barycentrics clamped to the triangle (no extrapolation).
+/// Attributes of triangle `tri` at pixel centre p, barycentrics clamped to the triangle (no extrapolation);
+/// `bary` receives what shade_pixel_backward needs of them.
 DD_HOST_DEVICE PixelAttr surface_attr(const MeshView& M, const ProjectedView& G, const Intrinsics& K, int tri,
-                                      Vec2f p) {
+                                      Vec2f p, detail::ShadeBary* bary) {
   if (tri < 0) return PixelAttr{0.f, {0.f, 0.f, 0.f}, 0.f};
   Vec3f c;
   float d;
-  shade_pixel(M, G, K, tri, p.x, p.y, &c, &d, true);
+  shade_pixel(M, G, K, tri, p.x, p.y, &c, &d, true, bary);
   return PixelAttr{1.f, {c.x, c.y, c.z}, d};
 }
 
@@ -78,9 +80,11 @@ DD_HOST_DEVICE bool discontinuity_blend(const MeshView& M, const ProjectedView& 
   const int idx_f = a_front ? idx_a : idx_b, idx_o = a_front ? idx_b : idx_a;
   const int tri_o = a_front ? tri_b : tri_a;
   if (t > 0.5f) {  // the near side's surface (C, continued to o's centre) covers part of o
-    *ev = BlendEvent{idx_o, t - 0.5f, 1.f, C, k, C, pf, po, po, surface_attr(M, G, K, C, po)};
+    *ev = BlendEvent{idx_o, t - 0.5f, 1.f, C, k, C, pf, po, po, {}, {}};
+    ev->from = surface_attr(M, G, K, C, po, &ev->src_bary);
   } else {  // what o shows (its own surface continued to f's centre, or background) covers part of f
-    *ev = BlendEvent{idx_f, 0.5f - t, -1.f, C, k, tri_o, pf, po, pf, surface_attr(M, G, K, tri_o, pf)};
+    *ev = BlendEvent{idx_f, 0.5f - t, -1.f, C, k, tri_o, pf, po, pf, {}, {}};
+    ev->from = surface_attr(M, G, K, tri_o, pf, &ev->src_bary);
   }
   return true;
 }
@@ -105,7 +109,7 @@ DD_HOST_DEVICE void blend_backward(const MeshView& M, const ProjectedView& G, co
   for (int ch = 0; ch < 3; ++ch) g_to->c[ch] -= e.w * g_out_to.c[ch];
   if (e.src_tri >= 0) {
     const Vec3f gc{e.w * g_out_to.c[0], e.w * g_out_to.c[1], e.w * g_out_to.c[2]};
-    shade_pixel_backward(M, G, K, e.src_tri, e.p_to.x, e.p_to.y, gc, e.w * g_out_to.d, grad6, true);
+    shade_pixel_backward(M, G, K, e.src_tri, e.p_to.x, e.p_to.y, gc, e.w * g_out_to.d, grad6, true, &e.src_bary);
   }
   if (g_w == 0.f) return;
   const int* v = M.triangles + 3 * e.tri;
