@@ -180,11 +180,10 @@ struct RasterStage {
     const Vec3f* X = p.cam + hy.vertex_offset;
     const int* v = o.M.triangles + 3 * t;
     const Vec2f s[3] = {P[v[0]], P[v[1]], P[v[2]]};
-    int bx0, bx1, by0, by1;  // covers no pixel centre of the region: nothing to set up
-    raster_bounds(s, &bx0, &bx1, &by0, &by1);
-    if (imax(hy.x0, bx0) > imin(hy.x0 + hy.w - 1, bx1) || imax(hy.y0, by0) > imin(hy.y0 + hy.h - 1, by1)) return;
+    TriangleRaster R;  // covers no pixel centre of the region: nothing to set up
+    raster_bounds(s, &R.x0, &R.x1, &R.y0, &R.y1);
+    if (imax(hy.x0, R.x0) > imin(hy.x0 + hy.w - 1, R.x1) || imax(hy.y0, R.y0) > imin(hy.y0 + hy.h - 1, R.y1)) return;
     const float z[3] = {X[v[0]].z, X[v[1]].z, X[v[2]].z};
-    TriangleRaster R;
     if (!triangle_raster_setup(s, z, &R)) return;
     const int xs = imax(hy.x0, R.x0), xe = imin(hy.x0 + hy.w - 1, R.x1);
     const int y_first = imax(hy.y0, R.y0), y_last = imin(hy.y0 + hy.h - 1, R.y1);

@@ -83,7 +83,9 @@ DD_HOST_DEVICE void raster_bounds(const Vec2f s[3], int* x0, int* x1, int* y0, i
   *y1 = floor_to_int(hy > s[2].y ? hy : s[2].y);
 }
 
-/// s: pixel positions, z: camera depths of the three vertices. False when the triangle has no fixed-point area.
+/// s: pixel positions, z: camera depths of the three vertices; r's x0 .. y1 must hold raster_bounds(s) already
+/// (the caller computes them first to skip triangles between pixel centres). False when the triangle has no
+/// fixed-point area.
 DD_HOST_DEVICE bool triangle_raster_setup(const Vec2f s[3], const float z[3], TriangleRaster* r) {
   constexpr long long kOne = 1LL << kSubpixelBits;
   for (int k = 0; k < 3; ++k) r->f[k] = to_fixed(s[k]);
@@ -99,7 +101,6 @@ DD_HOST_DEVICE bool triangle_raster_setup(const Vec2f s[3], const float z[3], Tr
     r->dx[k] = -r->orient * (r->f[(k + 1) % 3].y - r->f[k].y) * kOne;
     r->dy[k] = r->orient * (r->f[(k + 1) % 3].x - r->f[k].x) * kOne;
   }
-  raster_bounds(s, &r->x0, &r->x1, &r->y0, &r->y1);
   return true;
 }
 
