@@ -45,8 +45,8 @@ struct RefinerOptions {
   /// early_stop_patience iterations. 0 = always run all iterations.
   int early_stop_patience = 0;
   double early_stop_tolerance = 1e-4;
-  /// Speed: at 25 % and 50 % of the iterations keep only the better half of the runs (by their best loss so
-  /// far). Halves the work; the winner almost never comes from the dropped half (see README's figures).
+  /// Speed: at 25 %, 50 % and 75 % of the iterations keep only the better half of the runs (by their best loss
+  /// so far). Less than half the work; the winner almost never comes from a dropped half (see README's figures).
   /// false = the paper's algorithm exactly (every run goes to the end).
   bool successive_halving = true;
   /// Without an observed mask, the loss looks at the initial pose's projected bounding box grown by this

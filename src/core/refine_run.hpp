@@ -57,7 +57,7 @@ class RefineRun {
   std::vector<int> active_;  // runs still descending (successive halving drops the worst)
   int k_ = 0, stale_ = 0;
   int steps_ = 0;  // iterations stepped (k_ jumps when the coarse phase stalls)
-  int halvings_ = 0;  // successive halvings done (of two)
+  int halvings_ = 0;  // successive halvings done (of three)
   double best_overall_;
   bool done_ = false;
 };

@@ -178,8 +178,9 @@ RefineRun::RefineRun(const RefinerOptions& o, const Camera& camera, const Observ
 const std::vector<Pose>& RefineRun::batch() {
   const int iters = options_.iterations;
   const bool last = k_ == iters;
-  // Halvings are due at 25 % and 50 % of the iterations (">=": a stalled coarse phase may jump over them).
-  const int due = int(iters / 4 > 0 && k_ >= iters / 4) + int(iters / 2 > 0 && k_ >= iters / 2);
+  // Halvings are due at 25 %, 50 % and 75 % of the iterations (">=": a stalled coarse phase may jump over them).
+  const int due = int(iters / 4 > 0 && k_ >= iters / 4) + int(iters / 2 > 0 && k_ >= iters / 2) +
+                  int(3 * iters / 4 > 0 && k_ >= 3 * iters / 4);
   for (; options_.successive_halving && !last && halvings_ < due; ++halvings_) {
     if (active_.size() <= 1) continue;
     std::stable_sort(active_.begin(), active_.end(), [&](int a, int b) { return best_[a].total < best_[b].total; });

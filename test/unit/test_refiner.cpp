@@ -2,6 +2,8 @@
 // background and a brightness mismatch), its options, and its input checks.
 #include <gtest/gtest.h>
 
+#include <map>
+
 #include "diffdope/device.hpp"
 #include "diffdope/metrics.hpp"
 #include "diffdope/procedural.hpp"
@@ -96,6 +98,27 @@ TEST(Refiner, CoarseToFineEndsAtTheFineScale) {
   EXPECT_EQ(std::count_if(c.run_histories.begin(), c.run_histories.end(), [&](auto& h) { return h.size() == longest; }), 4);
   r->evaluate(s.cam, s.mesh, s.obs, {c.pose}, c2f.loss, false, v);
   EXPECT_NEAR(c.loss.total, v[0].total, 1e-6 * v[0].total);
+}
+
+// Successive halving keeps the better half of the runs at 25 %, 50 % and 75 % of the iterations: 16 runs give
+// 8 + 4 + 2 dropped there and 2 that go to the end, the winner among them and each dropped run's best no better
+// than the winner's; without it every run goes to the end (the paper's algorithm).
+TEST(Refiner, SuccessiveHalvingDropsTheWorseHalfThreeTimes) {
+  const Scene s = make_scene(4);
+  std::mt19937_64 rng(5);
+  const Pose init = perturb_pose(s.truth, s.mesh.center(), 10 * M_PI / 180, 0.01, rng);
+  RefinerOptions o = test_options();
+  o.iterations = 20;
+  o.coarse_fraction = 0;
+  const RefineResult r = Refiner(o).refine(s.cam, s.obs, s.mesh, init);
+  std::map<size_t, int> runs_by_length;
+  for (const auto& h : r.run_histories) ++runs_by_length[h.size()];
+  EXPECT_EQ(runs_by_length, (std::map<size_t, int>{{5, 8}, {10, 4}, {15, 2}, {21, 2}}));
+  EXPECT_EQ(r.run_histories[r.winner].size(), 21u);
+  for (double loss : r.run_losses) EXPECT_GE(loss, r.loss.total);
+  o.successive_halving = false;
+  const RefineResult all = Refiner(o).refine(s.cam, s.obs, s.mesh, init);
+  for (const auto& h : all.run_histories) EXPECT_EQ(h.size(), 21u);
 }
 
 TEST(Refiner, SeveralStartsTheBetterOneWins) {
