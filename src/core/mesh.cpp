@@ -264,6 +264,9 @@ void Mesh::build_lods() {
                                                        &unique_positions[0].x, unique, sizeof(Vec3f),
                                                        groups[g].size() / divisor / 3 * 3, 0.05f, options, &e);
       if (divisor == 1) std::copy(groups[g].begin(), groups[g].end(), next.begin());
+      // Triangles in an order that reuses vertices soon (neighbours near each other in memory): the raster,
+      // the silhouette walks and the backward pass then read vertices the cache still holds.
+      meshopt_optimizeVertexCache(next.data(), next.data(), n, unique);
       error = std::max(error, e);
       for (size_t i = 0; i < n; ++i) lod.triangles.push_back(int(representative[next[i]]));
       lod.tri_texture.insert(lod.tri_texture.end(), n / 3, texture_ids[g]);
