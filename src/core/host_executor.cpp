@@ -104,7 +104,6 @@ class HostExec {
   }
 
  private:
-  /// Stages over the pixels of a region (kPixels) are walked row by row: no division per pixel.
   /// One worker's per-hypothesis arrays, grown to the largest hypothesis it has run.
   struct Scratch {
     pipeline::Hypothesis hy;  // the hypothesis being run, its offsets zero
@@ -146,7 +145,8 @@ class HostExec {
     return out;
   }
 
-  /// Runs step s for hypothesis h of its pipeline; sums go to hypothesis h_out's outputs.
+  /// Runs step s for hypothesis h of its pipeline; sums go to hypothesis h_out's outputs. Stages over the pixels
+  /// of a region (kPixels) are walked row by row: no division per pixel.
   template <class Stage>
   static void step(const pipeline::Each<Stage>& s, int h, int) {
     const int n = std::min(s.n, s.stage.count(h));
