@@ -5,6 +5,9 @@
 #include <string>
 #include <vector>
 
+#include <memory>
+#include <ros/node_handle.h>
+
 #include "diffdope/pose.hpp"
 #include "diffdope_ros/InitialPoseArray.h"
 #include "diffdope_ros/RefinedPoseArray.h"
@@ -39,6 +42,10 @@ class PoseChecker {
               std::map<std::string, double> max_rotation_by_object = {})
       : max_t_(max_translation_m), max_r_(max_rotation_rad), symmetric_(std::move(symmetric)),
         max_r_by_object_(std::move(max_rotation_by_object)) {}
+
+  /// From the private parameters ~max_translation (m, 0.005), ~max_rotation_deg (2) and
+  /// ~max_rotation_deg_by_object ({name: degrees}, for the objects it names).
+  static std::unique_ptr<PoseChecker> fromParams(const ros::NodeHandle& pnh, std::map<std::string, bool> symmetric);
 
   void addGroundTruth(const InitialPoseArray& truth);
   /// Returns the rows this message could be matched with ground truth (also kept for summary()).

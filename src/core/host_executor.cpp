@@ -72,14 +72,16 @@ class HostExec {
     });
   }
   /// As run(), each hypothesis in its thread's own arrays: the steps see it as hypothesis 0 of a pipeline whose
-  /// per-hypothesis arrays are the thread's scratch; sums still land in the real hypothesis' outputs.
-  template <class... Steps>
-  void run_in_scratch(int B, const Steps&... steps) {
+  /// per-hypothesis arrays are the thread's scratch; sums still land in the real hypothesis' outputs. The steps
+  /// of one call share one Pipeline (render_pipeline.hpp builds them all from it).
+  template <class First, class... Steps>
+  void run_in_scratch(int B, const First& first, const Steps&... steps) {
     while (scratch_.size() < size_t(pool_.size())) scratch_.push_back(std::make_unique<Scratch>());
     pool_.parallel_for(B, [&](int h, int worker) {
-      Scratch& s = *scratch_[size_t(worker)];
+      const pipeline::Pipeline local = scratch_[size_t(worker)]->bind(first.stage.p, h);
       int k = 0;
-      (timed(rebased(steps, s, h), 0, h, k++), ...);
+      timed(with_pipeline(first, local), 0, h, k++);
+      (timed(with_pipeline(steps, local), 0, h, k++), ...);
     });
   }
 
@@ -116,32 +118,37 @@ class HostExec {
     HostBuffer<detail::ShadeBary> bary;
     HostBuffer<BlendEvent> events;
     HostBuffer<unsigned char> has_event;
+
+    /// `p` for hypothesis h of it, as hypothesis 0 of a pipeline whose per-hypothesis arrays are these.
+    pipeline::Pipeline bind(const pipeline::Pipeline& p, int h) {
+      hy = p.H[h];
+      hy.offset = hy.vertex_offset = hy.triangle_offset = 0;
+      const pipeline::ObjectParams& o = p.objects[hy.object];
+      const size_t nv = size_t(o.nv), nt = size_t(o.nt), n = size_t(hy.w) * size_t(hy.h);
+      pipeline::Pipeline out = p;
+      out.H = &hy;
+      out.cam = cam.reserve(nv);
+      out.pix = pix.reserve(nv);
+      out.area = area.reserve(nt);
+      out.level = level.reserve(nt);
+      out.key = key.reserve(n);
+      out.tri = tri.reserve(n);
+      out.pre = pre.reserve(n);
+      out.post = post.reserve(n);
+      out.bary = bary.reserve(n);
+      out.events = events.reserve(2 * n);
+      out.has_event = has_event.reserve(2 * n);
+      out.g_post = g_post.reserve(n);
+      out.grey = grey.reserve(n);
+      out.g_sx = g_sx.reserve(n);
+      out.g_sy = g_sy.reserve(n);
+      return out;
+    }
   };
-  /// The step with its pipeline pointing at s for hypothesis h (as hypothesis 0).
   template <class Step>
-  static Step rebased(const Step& step, Scratch& s, int h) {
+  static Step with_pipeline(const Step& step, const pipeline::Pipeline& p) {
     Step out = step;
-    pipeline::Pipeline& p = out.stage.p;
-    s.hy = p.H[h];
-    s.hy.offset = s.hy.vertex_offset = s.hy.triangle_offset = 0;
-    const pipeline::ObjectParams& o = p.objects[s.hy.object];
-    const size_t nv = size_t(o.nv), nt = size_t(o.nt), n = size_t(s.hy.w) * size_t(s.hy.h);
-    p.H = &s.hy;
-    p.cam = s.cam.reserve(nv);
-    p.pix = s.pix.reserve(nv);
-    p.area = s.area.reserve(nt);
-    p.level = s.level.reserve(nt);
-    p.key = s.key.reserve(n);
-    p.tri = s.tri.reserve(n);
-    p.pre = s.pre.reserve(n);
-    p.post = s.post.reserve(n);
-    p.bary = s.bary.reserve(n);
-    p.events = s.events.reserve(2 * n);
-    p.has_event = s.has_event.reserve(2 * n);
-    p.g_post = s.g_post.reserve(n);
-    p.grey = s.grey.reserve(n);
-    p.g_sx = s.g_sx.reserve(n);
-    p.g_sy = s.g_sy.reserve(n);
+    out.stage.p = p;
     return out;
   }
 

@@ -179,8 +179,8 @@ const std::vector<Pose>& RefineRun::batch() {
   const int iters = options_.iterations;
   const bool last = k_ == iters;
   // Halvings are due at 25 %, 50 % and 75 % of the iterations (">=": a stalled coarse phase may jump over them).
-  const int due = int(iters / 4 > 0 && k_ >= iters / 4) + int(iters / 2 > 0 && k_ >= iters / 2) +
-                  int(3 * iters / 4 > 0 && k_ >= 3 * iters / 4);
+  int due = 0;
+  for (int quarter = 1; quarter <= 3; ++quarter) due += quarter * iters / 4 > 0 && k_ >= quarter * iters / 4;
   for (; options_.successive_halving && !last && halvings_ < due; ++halvings_) {
     if (active_.size() <= 1) continue;
     std::stable_sort(active_.begin(), active_.end(), [&](int a, int b) { return best_[a].total < best_[b].total; });

@@ -17,7 +17,8 @@
 //   kWorkerScratch                   true: evaluate() calls run_in_scratch(B, steps...) instead, which gives
 //                                    every worker its own per-hypothesis arrays (Pipeline::cam .. g_sy, reused
 //                                    from one hypothesis to the next, so they stay in the core's cache); the
-//                                    pipeline then allocates none of them and reads none back
+//                                    pipeline then allocates none of them and reads none back. Every step of
+//                                    one call holds the same Pipeline.
 //   kSplitsTriangles                 whether big triangles are cut into bands of rows (more threads on a GPU)
 //   synchronize(what)                waits for the queued work; throws naming `what` on an error
 //   drain()                          waits for the queued work, ignoring errors (after a failed call)

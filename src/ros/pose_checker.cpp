@@ -8,6 +8,16 @@
 
 namespace diffdope_ros {
 
+std::unique_ptr<PoseChecker> PoseChecker::fromParams(const ros::NodeHandle& pnh,
+                                                     std::map<std::string, bool> symmetric) {
+  std::map<std::string, double> by_object;
+  pnh.getParam("max_rotation_deg_by_object", by_object);
+  for (auto& [name, deg] : by_object) deg *= M_PI / 180;
+  return std::make_unique<PoseChecker>(pnh.param("max_translation", 0.005),
+                                       pnh.param("max_rotation_deg", 2.0) * M_PI / 180, std::move(symmetric),
+                                       std::move(by_object));
+}
+
 PoseError pose_error(const diffdope::Pose& estimate, const diffdope::Pose& truth, bool symmetric) {
   PoseError e;
   e.translation_m = (estimate.t - truth.t).norm();

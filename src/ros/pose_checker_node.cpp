@@ -145,12 +145,7 @@ int main(int argc, char** argv) {
     ROS_FATAL("pose_checker: %s", e.what());
     return 2;
   }
-  std::map<std::string, double> max_r_by_object;  // ~max_rotation_deg_by_object: {name: degrees}
-  pnh.getParam("max_rotation_deg_by_object", max_r_by_object);
-  for (auto& [name, deg] : max_r_by_object) deg *= M_PI / 180;
-  node.checker = std::make_unique<diffdope_ros::PoseChecker>(
-      pnh.param("max_translation", 0.005), pnh.param("max_rotation_deg", 2.0) * M_PI / 180, symmetric,
-      max_r_by_object);
+  node.checker = diffdope_ros::PoseChecker::fromParams(pnh, symmetric);
   node.idle_timeout = pnh.param("idle_timeout", 5.0);
   node.start_timeout = pnh.param("start_timeout", 120.0);
   auto truth_sub = nh.subscribe("ground_truth", 100, &CheckerNode::onTruth, &node);

@@ -60,12 +60,11 @@ struct Recorder {
   }
 };
 
-// Parameters (private): max_translation (m, 0.005), max_rotation_deg (2), max_rotation_deg_by_object ({name: deg}
-// for the objects it names), expect_track (true: some frames must
-// be seeded by tracking once the detector is silent), check_outputs (true: overlay, markers, diagnostics).
+// Parameters (private): the limits of PoseChecker::fromParams (max_translation, max_rotation_deg,
+// max_rotation_deg_by_object), expect_track (true: some frames must be seeded by tracking once the detector is
+// silent), check_outputs (true: overlay, markers, diagnostics).
 TEST(BagAccuracy, RefinedPosesTfAndScores) {
   ros::NodeHandle nh, pnh("~");
-  const double max_t = pnh.param("max_translation", 0.005), max_r = pnh.param("max_rotation_deg", 2.0);
   const bool expect_track = pnh.param("expect_track", true), check_outputs = pnh.param("check_outputs", true);
   const bool has_mask = pnh.param("has_mask", true), has_depth = pnh.param("has_depth", true);
   // each_within false: only require that refinement improves on the detector on average (rgb-only input).
@@ -79,12 +78,8 @@ TEST(BagAccuracy, RefinedPosesTfAndScores) {
   std::map<std::string, bool> symmetric;
   for (const auto& o : cfg.objects) symmetric[o.name] = o.symmetric;
   Recorder rec;
-  // Per-object rotation limits (degrees), e.g. for a slender object whose roll about its long axis only the
-  // print decides: {bottle: 5}.
-  std::map<std::string, double> max_r_by_object;
-  pnh.getParam("max_rotation_deg_by_object", max_r_by_object);
-  for (auto& [name, deg] : max_r_by_object) deg *= M_PI / 180;
-  rec.checker = std::make_unique<diffdope_ros::PoseChecker>(max_t, max_r * M_PI / 180, symmetric, max_r_by_object);
+  // Per-object rotation limits, e.g. for a slender object whose roll about its long axis only the print decides.
+  rec.checker = diffdope_ros::PoseChecker::fromParams(pnh, symmetric);
   tf2_ros::Buffer tf_buffer(ros::Duration(120));
   tf2_ros::TransformListener tf_listener(tf_buffer);
   auto truth_sub = nh.subscribe("/ground_truth", 100, &Recorder::onTruth, &rec);

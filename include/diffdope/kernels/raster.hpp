@@ -56,17 +56,14 @@ struct TriangleRaster {
 /// floor / ceil of a finite pixel coordinate as an int, clamped to +-2^30 (far outside any image). On the host
 /// without SSE4.1 (the portable default build) floorf / ceilf are slow sequences: a truncation and a fix-up
 /// compare give the same integers.
-DD_HOST_DEVICE float clamp_coordinate(float x) {
-  const float lim = 1073741824.f;
-  return x < -lim ? -lim : (x > lim ? lim : x);
-}
+constexpr float kMaxCoordinate = 1073741824.f;
 DD_HOST_DEVICE int floor_to_int(float x) {
-  x = clamp_coordinate(x);
+  x = clampf(x, -kMaxCoordinate, kMaxCoordinate);
   const int i = static_cast<int>(x);  // truncates towards zero
   return i - (static_cast<float>(i) > x ? 1 : 0);
 }
 DD_HOST_DEVICE int ceil_to_int(float x) {
-  x = clamp_coordinate(x);
+  x = clampf(x, -kMaxCoordinate, kMaxCoordinate);
   const int i = static_cast<int>(x);
   return i + (static_cast<float>(i) < x ? 1 : 0);
 }
