@@ -109,39 +109,16 @@ class HostExec {
   /// One worker's per-hypothesis arrays, grown to the largest hypothesis it has run.
   struct Scratch {
     pipeline::Hypothesis hy;  // the hypothesis being run, its offsets zero
-    HostBuffer<Vec3f> cam;
-    HostBuffer<Vec2f> pix;
-    HostBuffer<float> area, level, grey, g_sx, g_sy;
-    HostBuffer<unsigned long long> key;
-    HostBuffer<int> tri;
-    HostBuffer<PixelAttr> pre, post, g_post;
-    HostBuffer<detail::ShadeBary> bary;
-    HostBuffer<BlendEvent> events;
-    HostBuffer<unsigned char> has_event;
+    pipeline::WorkArrays<HostBuffer> arrays;
 
     /// `p` for hypothesis h of it, as hypothesis 0 of a pipeline whose per-hypothesis arrays are these.
     pipeline::Pipeline bind(const pipeline::Pipeline& p, int h) {
       hy = p.H[h];
       hy.offset = hy.vertex_offset = hy.triangle_offset = 0;
       const pipeline::ObjectParams& o = p.objects[hy.object];
-      const size_t nv = size_t(o.nv), nt = size_t(o.nt), n = size_t(hy.w) * size_t(hy.h);
       pipeline::Pipeline out = p;
       out.H = &hy;
-      out.cam = cam.reserve(nv);
-      out.pix = pix.reserve(nv);
-      out.area = area.reserve(nt);
-      out.level = level.reserve(nt);
-      out.key = key.reserve(n);
-      out.tri = tri.reserve(n);
-      out.pre = pre.reserve(n);
-      out.post = post.reserve(n);
-      out.bary = bary.reserve(n);
-      out.events = events.reserve(2 * n);
-      out.has_event = has_event.reserve(2 * n);
-      out.g_post = g_post.reserve(n);
-      out.grey = grey.reserve(n);
-      out.g_sx = g_sx.reserve(n);
-      out.g_sy = g_sy.reserve(n);
+      arrays.bind(out, size_t(o.nv), size_t(o.nt), size_t(hy.w) * size_t(hy.h));
       return out;
     }
   };

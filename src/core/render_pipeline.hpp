@@ -71,7 +71,8 @@ class PipelineRenderer final : public Renderer {
     if (poses.empty()) return {};
     const Drain drain(exec_);
     const PixelRect box = mask_box(observed_mask, camera.width, camera.height, false);
-    const Call c = prepare(camera, {ObjectCall{&mesh, &poses, nullptr, nullptr, box}}, false, true);
+    Call c = prepare(camera, {ObjectCall{&mesh, &poses, nullptr, nullptr, box}}, false);
+    work_.bind(c.p, c.vertices, c.triangles, size_t(c.pixels));
     std::apply([&](const auto&... steps) { exec_.run(c.B, steps...); }, forward_steps(c));
     const size_t N = size_t(c.pixels);
     std::vector<PixelAttr> pre(N), post(N);
@@ -144,6 +145,7 @@ class PipelineRenderer final : public Renderer {
   struct Call {
     Pipeline p;
     int B, pixels, max_vertices, max_triangles, max_pixels;
+    size_t vertices, triangles;  // of all hypotheses
   };
 
   /// One level of detail of a mesh on the executor.
@@ -259,10 +261,10 @@ class PipelineRenderer final : public Renderer {
     }
   }
 
-  /// Packs every hypothesis of every object (hyp_, regions, offsets) and, when `packed`, sizes the buffers for
-  /// the stages. Evaluating (a loss setup per object): S = 1 without a mask and a non-rotation pose gets no work
-  /// and an infinite loss; rendering: only non-finite poses are skipped.
-  Call prepare(const Camera& camera, const std::vector<ObjectCall>& objects, bool evaluating, bool packed) {
+  /// Packs every hypothesis of every object (hyp_, regions, offsets); the caller binds the working arrays.
+  /// Evaluating (a loss setup per object): S = 1 without a mask and a non-rotation pose gets no work and an
+  /// infinite loss; rendering: only non-finite poses are skipped.
+  Call prepare(const Camera& camera, const std::vector<ObjectCall>& objects, bool evaluating) {
     camera.validate();
     call_start_ = uses_ + 1;  // meshes used from here on belong to this call
     Call c{};
@@ -317,22 +319,10 @@ class PipelineRenderer final : public Renderer {
     }
     c.B = int(B);
     c.pixels = int(pixels);
-    const size_t N = size_t(pixels);
+    c.vertices = size_t(vertices);
+    c.triangles = size_t(triangles);
     exec_.upload(d_hyp_, hyp_.data(), B);
     p.H = d_hyp_.ptr;
-    if (packed) {
-      p.cam = cam_.reserve(size_t(vertices));
-      p.pix = pix_.reserve(size_t(vertices));
-      p.area = area_.reserve(size_t(triangles));
-      p.level = level_.reserve(size_t(triangles));
-      p.key = key_.reserve(N);
-      p.tri = tri_.reserve(N);
-      p.pre = pre_.reserve(N);
-      p.post = post_.reserve(N);
-      p.bary = bary_.reserve(N);
-      p.events = events_.reserve(2 * N);
-      p.has_event = has_event_.reserve(2 * N);
-    }
 
     for (size_t k = 0; k < objects.size(); ++k) {  // loss constants and masks: evaluation only
       if (!objects[k].setup) continue;
@@ -410,23 +400,19 @@ class PipelineRenderer final : public Renderer {
   /// Forward, loss and (with_gradient) backward for the objects; outs[k] receives object k's values.
   void run(const Camera& camera, const FrameImages& frame, const std::vector<ObjectCall>& objects,
            bool with_gradient, std::vector<LossValue>* const* outs) {
-    constexpr bool packed = !Exec::kWorkerScratch;
-    Call c = prepare(camera, objects, true, packed);
+    Call c = prepare(camera, objects, true);
     Pipeline& p = c.p;
     p.I = frame.I;
     p.D = frame.D;
     bool edges = false;
     for (const ObjectCall& o : objects) edges = edges || o.setup->setup.k_edges != 0.f;
+    edges = edges && frame.E;  // (k_edges != 0 only with an edge image)
     p.E = edges ? frame.E : nullptr;
     p.with_gradient = with_gradient ? 1 : 0;
     const size_t B = size_t(c.B), N = size_t(c.pixels);
     out_.reserve(10 * B);
     exec_.zero(out_.ptr, 10 * B);
-    if (packed && with_gradient) p.g_post = g_post_.reserve(N);
-    if (packed && edges) {  // the edge term, after the per-pixel terms
-      p.grey = grey_.reserve(N);
-      if (with_gradient) p.g_sx = g_sx_.reserve(N), p.g_sy = g_sy_.reserve(N);
-    }
+    if (!Exec::kWorkerScratch) work_.bind(p, c.vertices, c.triangles, N);
     const int n = c.max_pixels, n_edges = edges ? n : 0, n_grad = with_gradient ? n : 0;
     // Every stage of the call in one run: on the CPU each hypothesis goes through all of them on one thread.
     std::apply(
@@ -475,15 +461,7 @@ class PipelineRenderer final : public Renderer {
   uint64_t depth_generation_ = 0;
   typename Exec::template Buffer<Hypothesis> d_hyp_;
   typename Exec::template Buffer<ObjectParams> d_objects_;
-  typename Exec::template Buffer<Vec3f> cam_;
-  typename Exec::template Buffer<Vec2f> pix_;
-  typename Exec::template Buffer<float> area_, level_, grey_, g_sx_, g_sy_;
-  typename Exec::template Buffer<unsigned long long> key_;
-  typename Exec::template Buffer<int> tri_;
-  typename Exec::template Buffer<PixelAttr> pre_, post_, g_post_;
-  typename Exec::template Buffer<detail::ShadeBary> bary_;
-  typename Exec::template Buffer<BlendEvent> events_;
-  typename Exec::template Buffer<unsigned char> has_event_;
+  WorkArrays<Exec::template Buffer> work_;  // packed for all hypotheses (unused when Exec::kWorkerScratch)
   typename Exec::template Buffer<double> out_;
 };
 

@@ -89,6 +89,42 @@ struct Pipeline {
   float *grey, *g_sx, *g_sy;
 };
 
+/// The per-hypothesis working arrays of a Pipeline (cam .. g_sy) in grow-only buffers Buffer<T> (T* reserve(n)):
+/// the pipeline's, packed for all hypotheses of a call, or one CPU worker's, for one hypothesis at a time.
+template <template <class> class Buffer>
+struct WorkArrays {
+  Buffer<Vec3f> cam;
+  Buffer<Vec2f> pix;
+  Buffer<float> area, level, grey, g_sx, g_sy;
+  Buffer<unsigned long long> key;
+  Buffer<int> tri;
+  Buffer<PixelAttr> pre, post, g_post;
+  Buffer<detail::ShadeBary> bary;
+  Buffer<BlendEvent> events;
+  Buffer<unsigned char> has_event;
+
+  /// Points p's arrays here, sized for that many vertices, triangles and pixels; the gradient's arrays only
+  /// when p.with_gradient, the edge term's only when p.E (otherwise left as they are in p).
+  void bind(Pipeline& p, size_t vertices, size_t triangles, size_t pixels) {
+    p.cam = cam.reserve(vertices);
+    p.pix = pix.reserve(vertices);
+    p.area = area.reserve(triangles);
+    p.level = level.reserve(triangles);
+    p.key = key.reserve(pixels);
+    p.tri = tri.reserve(pixels);
+    p.pre = pre.reserve(pixels);
+    p.post = post.reserve(pixels);
+    p.bary = bary.reserve(pixels);
+    p.events = events.reserve(2 * pixels);
+    p.has_event = has_event.reserve(2 * pixels);
+    if (p.with_gradient) p.g_post = g_post.reserve(pixels);
+    if (p.E) {
+      p.grey = grey.reserve(pixels);
+      if (p.with_gradient) p.g_sx = g_sx.reserve(pixels), p.g_sy = g_sy.reserve(pixels);
+    }
+  }
+};
+
 constexpr unsigned long long kEmptyKey = ~0ull;
 
 /// Keeps the smaller key: an atomic on the device; on the host each hypothesis runs on one thread.
