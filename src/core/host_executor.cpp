@@ -7,6 +7,7 @@
 #include <algorithm>
 #include <atomic>
 #include <chrono>
+#include <cstdint>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
@@ -51,6 +52,9 @@ class HostExec {
       if (t.name.load())
         std::fprintf(stderr, "  %-14s %10.1f ms %5.1f %%  %12lld hypothesis-runs\n", t.name.load(), 1e-6 * t.ns.load(),
                      total > 0 ? 100.0 * 1e-6 * t.ns.load() / total : 0.0, static_cast<long long>(t.runs.load()));
+    if (hypotheses_ > 0)
+      std::fprintf(stderr, "  per evaluated hypothesis: %.0f region pixels, %.0f triangles (level of detail)\n",
+                   double(region_pixels_) / double(hypotheses_), double(triangles_) / double(hypotheses_));
   }
   std::string name() const { return "cpu"; }
   template <class T>
@@ -79,6 +83,11 @@ class HostExec {
     while (scratch_.size() < size_t(pool_.size())) scratch_.push_back(std::make_unique<Scratch>());
     pool_.parallel_for(B, [&](int h, int worker) {
       const pipeline::Pipeline local = scratch_[size_t(worker)]->bind(first.stage.p, h);
+      if (profile_) {
+        region_pixels_ += int64_t(local.H->w) * local.H->h;
+        triangles_ += local.objects[local.H->object].nt;
+        ++hypotheses_;
+      }
       int k = 0;
       timed(with_pipeline(first, local), 0, h, k++);
       (timed(with_pipeline(steps, local), 0, h, k++), ...);
@@ -179,6 +188,7 @@ class HostExec {
   const bool profile_;
   static constexpr size_t kMaxSteps = 16;
   StageTime times_[kMaxSteps];
+  std::atomic<long long> region_pixels_{0}, triangles_{0}, hypotheses_{0};
   std::vector<std::unique_ptr<Scratch>> scratch_;  // per worker of pool_
   std::vector<cv::Mat> images_;
   std::vector<double> results_;

@@ -80,7 +80,7 @@ struct Pipeline {
   Vec3f* cam;
   Vec2f* pix;
   float *area, *level;
-  unsigned long long* key;  // z-buffer: (depth bits << 32) | triangle
+  unsigned long long* key;  // z-buffer: (depth_key(1/z) << 32) | triangle, smallest = nearest
   int* tri;
   PixelAttr *pre, *post, *g_post;
   detail::ShadeBary* bary;
@@ -146,6 +146,10 @@ DD_HOST_DEVICE unsigned float_bits(float f) {
 #endif
 }
 
+/// A positive inverse depth as 32 bits that order like the depth: positive floats' bits order like the floats,
+/// so complementing them puts the nearest (largest 1/z) first. Never all ones (that is kEmptyKey's half).
+DD_HOST_DEVICE unsigned depth_key(float inverse_depth) { return ~float_bits(inverse_depth); }
+
 DD_HOST_DEVICE int imin(int a, int b) { return a < b ? a : b; }
 DD_HOST_DEVICE int imax(int a, int b) { return a > b ? a : b; }
 
@@ -198,17 +202,16 @@ struct ClearStage {
 };
 
 /// i: (triangle, band) = (i / bands, i % bands). Walks the band's rows of the triangle's pixels in the region
-/// and keeps the nearest per pixel with key_min on (depth bits, triangle): depths are positive, so their float
-/// bits order like the floats, and ties keep the lower triangle index, as the CPU's scan does. The minimum does
-/// not depend on the order, so splitting big triangles into bands of rows (work for more threads) changes
-/// nothing in the result.
+/// and keeps the nearest per pixel with key_min on (depth_key(1/z), triangle): ties keep the lower triangle
+/// index. The minimum does not depend on the order, so splitting big triangles into bands of rows (work for
+/// more threads) changes nothing in the result.
 struct RasterStage {
   static constexpr const char* kName = "raster";
   Pipeline p;
   int bands;
   DD_HOST_DEVICE int count(int h) const { return p.objects[p.H[h].object].nt * bands; }
   DD_HOST_DEVICE void operator()(int i, int h) const {
-    const int t = i / bands, band = i % bands;
+    const int t = bands == 1 ? i : i / bands, band = bands == 1 ? 0 : i % bands;  // (the CPU's: no division)
     const Hypothesis& hy = p.H[h];
     const ObjectParams& o = p.objects[hy.object];
     if (t >= o.nt || !hy.valid || p.area[hy.triangle_offset + t] == 0.f) return;
@@ -231,12 +234,14 @@ struct RasterStage {
       long long e[3] = {e_row[0], e_row[1], e_row[2]};
       int lo = xs, hi = xe;
       if (!raster_row_span(R, xs, e, &lo, &hi)) continue;
-      for (int x = lo; x <= hi; ++x, e[0] += R.dx[0], e[1] += R.dx[1], e[2] += R.dx[2]) {
-        if (!raster_inside(R, e)) continue;
-        const float zp = raster_depth(R, e);
-        if (!(zp < INFINITY)) continue;  // as the CPU's zp < +inf test
-        const unsigned long long k = (static_cast<unsigned long long>(float_bits(zp)) << 32) | unsigned(t);
-        key_min(p.key + hy.offset + (y - hy.y0) * hy.w + (x - hy.x0), k);
+      // The row's edge functions in locals (registers, not the array raster_row_span wrote).
+      long long e0 = e[0], e1 = e[1], e2 = e[2];
+      const int row = hy.offset + (y - hy.y0) * hy.w - hy.x0;  // + x: the pixel's key
+      for (int x = lo; x <= hi; ++x, e0 += R.dx[0], e1 += R.dx[1], e2 += R.dx[2]) {
+        if (!raster_inside(R, e0, e1, e2)) continue;
+        const float iz = raster_inverse_depth(R, e0, e1, e2);
+        if (!(iz > 0.f)) continue;  // (vertices are in front of the near plane: only a NaN fails)
+        key_min(p.key + (row + x), (static_cast<unsigned long long>(depth_key(iz)) << 32) | unsigned(t));
       }
     }
   }

@@ -47,7 +47,7 @@ struct TriangleRaster {
   long long orient;     // sign of the fixed-point area
   long long dx[3];      // change of edge function k per pixel step in x (fixed-point units)
   long long dy[3];      // ... and per pixel step in y
-  bool top_left[3];     // fill rule of edge k (v_k -> v_k+1)
+  long long fill[3];    // fill rule of edge k (v_k -> v_k+1): 0 when it is top-left (a centre on it counts), else -1
   float inv2a;          // 1 / |2 area| (fixed-point units)
   float iz[3];          // 1/z of the vertex edge k weighs (edge k weighs vertex k+2): depth is linear in 1/z
   int x0, x1, y0, y1;   // pixel bounding box (inclusive, not clipped to the image)
@@ -94,7 +94,7 @@ DD_HOST_DEVICE bool triangle_raster_setup(const Vec2f s[3], const float z[3], Tr
   r->iz[1] = 1.f / z[0];
   r->iz[2] = 1.f / z[1];
   for (int k = 0; k < 3; ++k) {
-    r->top_left[k] = edge_is_top_left_fixed(r->f[k], r->f[(k + 1) % 3], r->orient);
+    r->fill[k] = edge_is_top_left_fixed(r->f[k], r->f[(k + 1) % 3], r->orient) ? 0 : -1;
     r->dx[k] = -r->orient * (r->f[(k + 1) % 3].y - r->f[k].y) * kOne;
     r->dy[k] = r->orient * (r->f[(k + 1) % 3].x - r->f[k].x) * kOne;
   }
@@ -128,15 +128,17 @@ DD_HOST_DEVICE bool raster_row_span(const TriangleRaster& r, int xs, long long e
   return true;
 }
 
-DD_HOST_DEVICE bool raster_inside(const TriangleRaster& r, const long long e[3]) {
-  bool inside = true;
-  for (int k = 0; k < 3; ++k) inside &= e[k] > 0 || (e[k] == 0 && r.top_left[k]);
-  return inside;
+/// Whether the pixel centre with edge functions e0..e2 is covered: each e_k > 0, or = 0 on a top-left edge. The
+/// edge functions are integers, so that is e_k + fill_k >= 0 for all three, one sign test of their OR (no
+/// branch per edge: a small triangle's pixels are a coin toss for a branch predictor).
+DD_HOST_DEVICE bool raster_inside(const TriangleRaster& r, long long e0, long long e1, long long e2) {
+  return ((e0 + r.fill[0]) | (e1 + r.fill[1]) | (e2 + r.fill[2])) >= 0;
 }
 
-/// Camera depth at the pixel whose edge functions are e (1/z interpolated linearly in the image).
-DD_HOST_DEVICE float raster_depth(const TriangleRaster& r, const long long e[3]) {
-  return 1.f / ((float(e[0]) * r.iz[0] + float(e[1]) * r.iz[1] + float(e[2]) * r.iz[2]) * r.inv2a);
+/// 1 / camera depth at the pixel whose edge functions are e0..e2 (1/z is linear in the image). The z-buffer
+/// orders by it (nearer = larger), which spares a division per pixel.
+DD_HOST_DEVICE float raster_inverse_depth(const TriangleRaster& r, long long e0, long long e1, long long e2) {
+  return (float(e0) * r.iz[0] + float(e1) * r.iz[1] + float(e2) * r.iz[2]) * r.inv2a;
 }
 
 /// Perspective-correct barycentrics of the intersection of viewing ray d with the camera-space triangle
