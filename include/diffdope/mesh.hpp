@@ -101,11 +101,13 @@ class Mesh {
   /// `lod` > 0: the triangles of lods()[lod - 1] over the same vertices and textures.
   MeshView view(std::vector<TextureView>& texture_storage, int lod = 0) const;
 
-  /// Simplified surfaces, each about half the triangles of the one before and with a larger error (empty for
+  /// Simplified surfaces, each about 1 / kLodStep of the triangles of the one before (a finer choice than halving:
+  /// an object seen small then gets a level near the error it can afford) and with a larger error (empty for
   /// meshes of at most kLodMinTriangles triangles). A triangle soup's first level is the whole surface over
   /// merged vertices (error 0). Built by finalize().
   const std::vector<MeshLod>& lods() const { return lods_; }
   static constexpr int kLodMinTriangles = 1024;
+  static constexpr double kLodStep = 1.41421356;
   /// Closed and outward (see closed_and_outward()) for level `lod` (0 = the full mesh).
   bool closed_and_outward(int lod) const { return lod == 0 ? closed_outward_ : lods_[lod - 1].closed_outward; }
 

@@ -238,8 +238,8 @@ void Mesh::build_lods() {
   std::vector<unsigned> all(triangles.size());
   for (size_t i = 0; i < triangles.size(); ++i) all[i] = remap[size_t(triangles[i])];
   const float scale = meshopt_simplifyScale(&unique_positions[0].x, unique, sizeof(Vec3f));
-  // Each level is simplified from the full mesh (so its error is measured against the full surface), to half
-  // the triangles of the level before, down to about kLodMinTriangles / 4 triangles.
+  // Each level is simplified from the full mesh (so its error is measured against the full surface), to
+  // 1 / kLodStep of the triangles of the level before, down to about kLodMinTriangles / 4 triangles.
   std::vector<int> texture_ids(tri_texture);
   std::sort(texture_ids.begin(), texture_ids.end());
   texture_ids.erase(std::unique(texture_ids.begin(), texture_ids.end()), texture_ids.end());
@@ -254,15 +254,16 @@ void Mesh::build_lods() {
   // A triangle soup first gets a level of all its triangles over the merged vertices (error 0, fewer vertices
   // to transform).
   const bool soup = unique * 4 < positions.size() * 3;
-  for (size_t divisor = soup ? 1 : 2; previous > size_t(kLodMinTriangles) / 4; divisor *= 2) {
+  for (double divisor = soup ? 1 : kLodStep; previous > size_t(kLodMinTriangles) / 4; divisor *= kLodStep) {
     MeshLod lod;
     float error = 0;
     for (size_t g = 0; g < groups.size(); ++g) {
       float e = 0;
+      const size_t target = size_t(double(groups[g].size() / 3) / divisor) * 3;
       const size_t n = divisor == 1 ? groups[g].size()
                                     : meshopt_simplify(next.data(), groups[g].data(), groups[g].size(),
-                                                       &unique_positions[0].x, unique, sizeof(Vec3f),
-                                                       groups[g].size() / divisor / 3 * 3, 0.05f, options, &e);
+                                                       &unique_positions[0].x, unique, sizeof(Vec3f), target,
+                                                       0.05f, options, &e);
       if (divisor == 1) std::copy(groups[g].begin(), groups[g].end(), next.begin());
       // Triangles in an order that reuses vertices soon (neighbours near each other in memory): the raster,
       // the silhouette walks and the backward pass then read vertices the cache still holds.
@@ -272,7 +273,7 @@ void Mesh::build_lods() {
       lod.tri_texture.insert(lod.tri_texture.end(), n / 3, texture_ids[g]);
     }
     const size_t count = size_t(lod.num_triangles());
-    if (count == 0 || (divisor > 1 && count > previous * 3 / 4)) break;  // stuck (topology, error cap)
+    if (count == 0 || (divisor > 1 && double(count) > double(previous) * 0.85)) break;  // stuck (topology, error cap)
     previous = count;
     lod.error = double(error) * scale;
     // Only the vertices this level uses, in the order its triangles first use them (cache locality).
