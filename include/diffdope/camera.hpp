@@ -33,8 +33,12 @@ struct Camera {
 
   /// 3x3 intrinsic matrix K.
   Eigen::Matrix3d K() const;
-  /// Throws std::invalid_argument with the reason when intrinsics or size are unusable.
+  /// Throws std::invalid_argument with the reason when intrinsics or size are unusable: focal lengths in
+  /// [kMinFocal, kMaxFocal] pixels, width and height in [1, kMaxSize], the principal point within ten image
+  /// sizes of the origin, everything finite.
   void validate() const;
+  static constexpr double kMinFocal = 0.1, kMaxFocal = 1e7;
+  static constexpr int kMaxSize = 16384;
   bool valid() const;
 
   Intrinsics intrinsics() const {

@@ -19,6 +19,9 @@ struct TrackOptions {
   /// moves: between refined frames a moving object can turn further than the refiner's basin.
   bool predict = true;
   double max_extrapolation = 2.0;    // extrapolate at most this multiple of the last interval
+  /// Ranges: ages and timeouts [0, 3600] s, max_failures [1, 1000], max_extrapolation [0, 100]. Throws
+  /// std::invalid_argument naming the first field outside its range (names as the node's parameters).
+  void validate() const;
 };
 
 enum class SeedSource { kDetector, kTrack, kPrediction, kRequest };
@@ -37,7 +40,7 @@ class ObjectTrack {
   /// extrapolated about it.
   explicit ObjectTrack(const TrackOptions& options = TrackOptions(),
                        const Eigen::Vector3d& pivot = Eigen::Vector3d::Zero())
-      : options_(options), pivot_(pivot) {}
+      : options_((options.validate(), options)), pivot_(pivot) {}
 
   /// A detection (already in the camera frame) stamped `stamp`. Replaces any unused one (newest arrival wins).
   void add_detection(const Pose& pose_in_camera, double stamp);

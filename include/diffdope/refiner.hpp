@@ -15,10 +15,12 @@
 
 namespace diffdope {
 
-/// Every field has a default and the same name as its YAML key (see config/default.yaml).
+/// Every field has a default and the same name as its YAML key (see config/default.yaml). validate() checks that
+/// every number is finite and inside the range given with it; ranges are generous (far beyond useful values)
+/// but bound the time and memory one refinement can take.
 struct RefinerOptions {
-  int batch_size = 32;   // B: parallel runs (paper: 32)
-  int iterations = 100;  // gradient steps per run (paper: 100)
+  int batch_size = 32;   // B: parallel runs (paper: 32); [1, kMaxBatchSize]
+  int iterations = 100;  // gradient steps per run (paper: 100); [0, kMaxIterations]
   /// Learning-rate bounds, dimensionless. A step moves the object's centre by about lr * 2 * diameter * (loss
   /// slope) and turns it by about 4 * lr * (slope) radians: translation gradients are scaled by diameter^2 and
   /// rotation gradients (taken about the object's centre) by 4, so one rate means the same for small and big
@@ -27,37 +29,38 @@ struct RefinerOptions {
   /// paper's l = 0.001, h = 50 belong to its own loss scaling (a sum over pixels); the same behaviour (small
   /// rates polish easy starts, large ones escape hard starts) holds here for [0.0005, 0.03]: over 100 decayed
   /// steps the smallest rate travels ~4 % of the diameter, the largest ~2.3 diameters / 4 rad.
-  double lr_low = 0.0005;
-  double lr_high = 0.03;
+  double lr_low = 0.0005;  // (0, 10]
+  double lr_high = 0.03;   // (0, 10], >= lr_low
   bool lr_log_uniform = false;  // draw log-uniformly (the paper's "exponent" variant) instead of uniformly
-  double lr_decay = 0.1;        // rate multiplier reached at the last iteration (paper: 0.1)
-  double image_scale = 0.5;     // images and intrinsics are resized by this before refining (paper: 0.5)
+  double lr_decay = 0.1;        // rate multiplier reached at the last iteration (paper: 0.1); (0, 1]
+  double image_scale = 0.5;     // images and intrinsics are resized by this before refining (paper: 0.5);
+                                // [kMinImageScale, 4]
   /// Coarse to fine: the first coarse_fraction of the iterations run on images resized by
   /// image_scale * coarse_scale (at 0.5, a quarter of the pixels), the rest at image_scale; the best pose of
   /// each run is then sought among the fine iterations only. coarse_fraction 0 = every iteration at image_scale
   /// (the paper's algorithm). The coarse phase is where the large moves of a hard start happen; the fine phase
   /// polishes.
   double coarse_fraction = 0.5;  // in [0, 1)
-  double coarse_scale = 0.5;     // in (0, 1]
+  double coarse_scale = 0.5;     // in [0.05, 1]; image_scale * coarse_scale >= kMinImageScale
   LossOptions loss;             // term weights (all 1 as in the paper) and robustness constants
   uint64_t seed = 0;            // learning-rate draws; same seed, same inputs -> same result
   /// Stop when no run has improved its best loss by more than early_stop_tolerance (relative) for
   /// early_stop_patience iterations. 0 = always run all iterations.
-  int early_stop_patience = 0;
-  double early_stop_tolerance = 1e-4;
+  int early_stop_patience = 0;          // [0, kMaxIterations]
+  double early_stop_tolerance = 1e-4;   // [0, 1]
   /// Speed: at 25 %, 50 % and 75 % of the iterations keep only the better half of the runs (by their best loss
   /// so far). Less than half the work; the winner almost never comes from a dropped half (see README's figures).
   /// false = the paper's algorithm exactly (every run goes to the end).
   bool successive_halving = true;
   /// Without an observed mask, the loss looks at the initial pose's projected bounding box grown by this
   /// fraction of its size on every side (the object is assumed to stay inside that window).
-  double no_mask_window = 0.3;
+  double no_mask_window = 0.3;  // [0, 10]
   /// Quality: a depth reading within this distance (metres) of the render is an inlier.
-  double inlier_threshold = 0.01;
+  double inlier_threshold = 0.01;  // (0, 10]
   /// Verdict thresholds: plausible when mask IoU >= min_mask_iou (if a mask was given) and the depth inlier
   /// fraction >= min_depth_inliers (if depth was given).
-  double min_mask_iou = 0.5;
-  double min_depth_inliers = 0.5;
+  double min_mask_iou = 0.5;       // [0, 1]
+  double min_depth_inliers = 0.5;  // [0, 1]
   RenderOptions render;  // back-face culling, near plane, threads
   /// Backend: cpu, cuda (an error without a device) or auto (CUDA when a device is present, else the CPU with
   /// one line on stderr). Default cpu: the CUDA backend shares the CPU's maths but has not yet been run on a
@@ -72,7 +75,11 @@ struct RefinerOptions {
   static RefinerOptions from_yaml_string(const std::string& yaml, const std::string& origin = "<string>");
   static RefinerOptions from_yaml_string(const std::string& yaml, const RefinerOptions& base,
                                          const std::string& origin);
-  /// Throws std::invalid_argument if a value is out of range.
+  static constexpr int kMaxBatchSize = 1024;
+  static constexpr int kMaxIterations = 10000;
+  static constexpr double kMinImageScale = 0.02;
+  /// Throws std::invalid_argument naming the first field that is not finite or outside its range (loss and
+  /// render included).
   void validate() const;
 };
 

@@ -20,18 +20,23 @@ struct RenderOptions {
   /// Cull back faces anyway when the mesh is closed and wound outward (Mesh::closed_and_outward): exact for a
   /// camera outside the object, and roughly halves the rasterisation work.
   bool auto_cull_closed = true;
-  /// Triangles with a vertex closer than this (metres) are not drawn.
+  /// Triangles with a vertex closer than this (metres) are not drawn. (0, 10].
   double near_plane = 0.01;
   /// Pixels added around the region of interest (projected model box union observed mask). >= 1 so that
-  /// silhouette blends of border pixels are inside.
+  /// silhouette blends of border pixels are inside. [0, kMaxRoiMargin] (0 counts as 1).
   int roi_margin = 2;
   /// false: work on the full frame (results are identical; for tests and debugging).
   bool use_roi = true;
   /// Level of detail: draw a mesh's coarsest simplified surface (Mesh::lods()) whose error, projected at the
-  /// object's nearest point, is at most this many pixels of the rendered image. 0 = always the full mesh.
+  /// object's nearest point, is at most this many pixels of the rendered image. 0 = always the full mesh. [0, 100].
   double lod_pixel_error = 0.25;
-  /// Worker threads (CPU executor); 0 = all hardware threads.
+  /// Worker threads (CPU executor); 0 = all hardware threads. [0, kMaxThreads].
   int threads = 0;
+
+  static constexpr int kMaxRoiMargin = 256;
+  static constexpr int kMaxThreads = 256;
+  /// Throws std::invalid_argument naming the first field that is not finite or outside its range.
+  void validate() const;
 };
 
 /// Loss weights and robustness constants. Each term is a mean, so values (and gradients, per metre/radian) do
@@ -43,6 +48,8 @@ struct RenderOptions {
 ///   edges = mean over S of |E_obs - E_render|, E_render = m / (m + edge_scale), m = |Sobel(grey of the render)|
 ///           (only when the observation carries an edge map, see Observation::edges)
 /// where S is the observed mask (all ones when absent) and cov the antialiased coverage of the render.
+/// Ranges (checked by validate()): weights [0, kMaxWeight], not all 0; edge_scale [0.001, 100]; rgb_miss [0, 10];
+/// depth_truncation [0.0001, 10] m; occlusion_margin [0, 10] m.
 struct LossOptions {
   double weight_rgb = 1.0;
   double weight_depth = 1.0;
@@ -54,6 +61,10 @@ struct LossOptions {
   /// Metres: where the observed depth is this much nearer than the render, an occluder hides the object, so
   /// an empty observed mask there is not evidence against the render (mask term skips the pixel). 0 = off.
   double occlusion_margin = 0.02;
+
+  static constexpr double kMaxWeight = 1000;
+  /// Throws std::invalid_argument naming the first field that is not finite or outside its range.
+  void validate() const;
 };
 
 /// One hypothesis' loss: per-term means (unweighted), the weighted total, and d(total)/d(delta).
@@ -106,7 +117,7 @@ class Renderer {
                                 bool with_gradient, std::vector<std::vector<LossValue>>& out) = 0;
 
  protected:
-  explicit Renderer(const RenderOptions& options) : options_(options) {}
+  explicit Renderer(const RenderOptions& options) : options_((options.validate(), options)) {}
   /// Each object's observation (the frame's rgb / depth / edges with its own mask), checked against the camera,
   /// with the object's mesh and loss constants: what every backend's evaluate_objects() starts from.
   static std::vector<Observation> object_observations(const Camera& camera, const Observation& frame,

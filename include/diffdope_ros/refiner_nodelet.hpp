@@ -136,6 +136,7 @@ class RefinerNodelet : public nodelet::Nodelet {
   Mode mode_ = Mode::kTracking;
   bool use_depth_ = true, use_mask_ = false, publish_tf_ = true, publish_implausible_ = false;
   int queue_size_ = 10;
+  std::string parameter_error_;  // a parameter outside its range (loadParameters): no object is refined
   double max_interval_ = 0.1, sync_timeout_ = 3.0, tf_timeout_ = 0.1;
   std::string frame_prefix_, fixed_frame_, detection_prefix_;
   diffdope::TrackOptions track_options_;

@@ -1,6 +1,7 @@
 #include "diffdope/camera.hpp"
 
 #include <cmath>
+#include <sstream>
 #include <stdexcept>
 
 namespace diffdope {
@@ -34,16 +35,19 @@ Eigen::Matrix3d Camera::K() const {
 }
 
 bool Camera::valid() const {
-  return std::isfinite(fx) && std::isfinite(fy) && std::isfinite(cx) && std::isfinite(cy) && fx > 0 && fy > 0 &&
-         width > 0 && height > 0;
+  return std::isfinite(fx) && std::isfinite(fy) && std::isfinite(cx) && std::isfinite(cy) && fx >= kMinFocal &&
+         fy >= kMinFocal && fx <= kMaxFocal && fy <= kMaxFocal && width > 0 && height > 0 && width <= kMaxSize &&
+         height <= kMaxSize && std::abs(cx) <= 10.0 * width && std::abs(cy) <= 10.0 * height;
 }
 
 void Camera::validate() const {
-  if (!valid())
-    throw std::invalid_argument("camera: unusable intrinsics (fx=" + std::to_string(fx) + ", fy=" +
-                                std::to_string(fy) + ", cx=" + std::to_string(cx) + ", cy=" + std::to_string(cy) +
-                                ", " + std::to_string(width) + "x" + std::to_string(height) +
-                                "): focal lengths and size must be positive and finite");
+  if (!valid()) {
+    std::ostringstream m;
+    m << "camera: unusable intrinsics (fx=" << fx << ", fy=" << fy << ", cx=" << cx << ", cy=" << cy << ", " << width
+      << "x" << height << "): focal lengths must be in [" << kMinFocal << ", " << kMaxFocal
+      << "] pixels, the size in [1, " << kMaxSize << "] and the principal point within 10 image sizes";
+    throw std::invalid_argument(m.str());
+  }
 }
 
 }  // namespace diffdope

@@ -180,6 +180,16 @@ void Mesh::finalize() {
     bbox_min_ = bbox_min_.cwiseMin(to_eigen(p));
     bbox_max_ = bbox_max_.cwiseMax(to_eigen(p));
   }
+  // A mesh whose every triangle has no area draws nothing: refining it would "converge" on nothing.
+  const double min_area2 = 1e-12 * (bbox_max_ - bbox_min_).squaredNorm();
+  bool any_area = false;
+  for (int t = 0; t < nt && !any_area; ++t) {
+    const Eigen::Vector3d a = to_eigen(positions[size_t(triangles[3 * t])]);
+    const Eigen::Vector3d b = to_eigen(positions[size_t(triangles[3 * t + 1])]);
+    const Eigen::Vector3d c = to_eigen(positions[size_t(triangles[3 * t + 2])]);
+    any_area = (b - a).cross(c - a).norm() > min_area2;
+  }
+  if (!any_area) throw std::runtime_error(who + "every triangle is degenerate (no area)");
   diameter_ = compute_diameter(positions);
   build_adjacency();
   build_mipmaps();

@@ -15,6 +15,7 @@
 #include <optional>
 #include <opencv2/imgproc.hpp>
 #include <random>
+#include <sstream>
 #include <stdexcept>
 
 namespace diffdope {
@@ -98,6 +99,34 @@ RefineResult Refiner::refine(const Camera& camera, const Observation& observed, 
   return run.finish(*renderer_);
 }
 
+namespace {
+
+/// An initial pose whose object is outside the image, or projects smaller than a couple of pixels at the
+/// refining scale, has nothing to be refined against: a refinement would only "converge" on noise.
+void check_in_view(const Camera& cam, const Mesh& mesh, const Pose& pose, double near_plane) {
+  if (mesh.content_id() == 0) return;  // not finalized: the renderer says so
+  std::vector<Eigen::Vector3d> corners = mesh.bbox_corners();
+  for (Eigen::Vector3d& c : corners) c = pose * c;
+  const Eigen::AlignedBox2d box = cam.project_bounds(corners, near_plane);
+  if (box.isEmpty()) return;  // the object reaches the camera plane: its projection is unbounded, so in view
+  const Eigen::AlignedBox2d image(Eigen::Vector2d(-0.5, -0.5), Eigen::Vector2d(cam.width - 0.5, cam.height - 0.5));
+  std::ostringstream m;
+  m.precision(4);
+  if (!box.intersects(image)) {
+    m << "refine: initial pose puts the object outside the image (t = " << pose.t.transpose() << " m)";
+    throw std::invalid_argument(m.str());
+  }
+  const double z = (pose * mesh.center()).z();
+  const double pixels = mesh.diameter() * std::max(cam.fx, cam.fy) / z;
+  if (pixels < 2.0) {
+    m << "refine: at the initial pose the object is " << pixels << " pixels across at the refining scale (z = "
+      << z << " m); at least 2 are needed";
+    throw std::invalid_argument(m.str());
+  }
+}
+
+}  // namespace
+
 RefineRun::RefineRun(const RefinerOptions& o, const Camera& camera, const Observation& observed, const Mesh& mesh,
                      const std::vector<Pose>& initials, const Observation* scaled_frame,
                      const Observation* coarse_frame)
@@ -113,6 +142,7 @@ RefineRun::RefineRun(const RefinerOptions& o, const Camera& camera, const Observ
     if (!(centre0.z() > o.render.near_plane))
       throw std::invalid_argument("refine: initial pose puts the object behind the camera (z = " +
                                   std::to_string(centre0.z()) + " m)");
+    check_in_view(scaled_camera(camera, o.image_scale), mesh, initial, o.render.near_plane);
   }
   const Pose& initial = initials.front();
   const int starts = int(initials.size());

@@ -1,18 +1,38 @@
 // RefinerOptions from YAML (the same keys as the struct's fields; see config/default.yaml).
 #include <yaml-cpp/yaml.h>
 
+#include <cmath>
 #include <set>
+#include <sstream>
+#include <type_traits>
 #include <stdexcept>
 
+#include "diffdope/object_track.hpp"
+#include "diffdope/option_range.hpp"
 #include "diffdope/refiner.hpp"
 
 namespace diffdope {
 namespace {
 
 template <typename T>
+const char* type_name() {
+  if (std::is_same<T, bool>::value) return "true or false";
+  if (std::is_integral<T>::value) return "an integer";
+  if (std::is_floating_point<T>::value) return "a number";
+  return "a string";
+}
+
+template <typename T>
 void read(const YAML::Node& node, const char* key, T& value, std::set<std::string>& used) {
   used.insert(key);
-  if (node[key]) value = node[key].as<T>();
+  const YAML::Node v = node[key];
+  if (!v) return;
+  try {
+    value = v.as<T>();
+  } catch (const YAML::Exception&) {
+    throw std::invalid_argument(std::string(key) + ": expected " + type_name<T>() + ", got '" +
+                                (v.IsScalar() ? v.Scalar() : std::string("a list or mapping")) + "'");
+  }
 }
 
 void reject_unknown(const YAML::Node& node, const std::set<std::string>& used, const std::string& where) {
@@ -71,6 +91,8 @@ RefinerOptions parse(const YAML::Node& root, RefinerOptions o, const std::string
     }
   } catch (const YAML::Exception& e) {
     throw std::runtime_error(origin + ": " + e.what());
+  } catch (const std::invalid_argument& e) {
+    throw std::runtime_error(origin + ": " + e.what());
   }
   reject_unknown(root, used, origin);
   try {
@@ -114,23 +136,81 @@ RefinerOptions RefinerOptions::from_yaml_string(const std::string& yaml, const s
   return from_yaml_string(yaml, RefinerOptions(), origin);
 }
 
+namespace {
+void fail_range(const OptionRange& r, const std::string& name, double v, char open, double lo, double hi,
+                const std::string& unit) {
+  std::ostringstream m;
+  m << name << " = " << v << " is " << (std::isfinite(v) ? "outside " : "not finite; allowed: ") << open << lo << ", "
+    << hi << "]" << unit;
+  r.fail(m.str());
+}
+}  // namespace
+
+// Every option range of the library is checked here (refiner, loss, render, tracking): every number must be
+// finite and inside its documented range (include/diffdope/refiner.hpp, renderer.hpp, object_track.hpp), so a
+// typo cannot turn into NaN losses, an endless refinement or a hung thread pool.
+void OptionRange::fail(const std::string& message) const { throw std::invalid_argument(what + ": " + message); }
+void OptionRange::operator()(const std::string& name, double v, double lo, double hi, const std::string& unit) const {
+  if (!(std::isfinite(v) && v >= lo && v <= hi)) fail_range(*this, name, v, '[', lo, hi, unit);
+}
+void OptionRange::above(const std::string& name, double v, double lo, double hi, const std::string& unit) const {
+  if (!(std::isfinite(v) && v > lo && v <= hi)) fail_range(*this, name, v, '(', lo, hi, unit);
+}
+
+void RenderOptions::validate() const {
+  const OptionRange check{"render options"};
+  check.above("render.near_plane", near_plane, 0, 10, " metres");
+  check("render.roi_margin", roi_margin, 0, kMaxRoiMargin, " pixels");
+  check("render.lod_pixel_error", lod_pixel_error, 0, 100, " pixels (0: always the full mesh)");
+  check("render.threads", threads, 0, kMaxThreads, " (0: all cores)");
+}
+
+void LossOptions::validate() const {
+  const OptionRange check{"loss options"};
+  check("loss.weight_rgb", weight_rgb, 0, kMaxWeight);
+  check("loss.weight_depth", weight_depth, 0, kMaxWeight);
+  check("loss.weight_mask", weight_mask, 0, kMaxWeight);
+  check("loss.weight_edges", weight_edges, 0, kMaxWeight);
+  if (weight_rgb + weight_depth + weight_mask + weight_edges == 0) check.fail("every loss weight is 0: nothing to minimise");
+  check("loss.edge_scale", edge_scale, 1e-3, 100);
+  check("loss.rgb_miss", rgb_miss, 0, 10);
+  check("loss.depth_truncation", depth_truncation, 1e-4, 10, " metres");
+  check("loss.occlusion_margin", occlusion_margin, 0, 10, " metres (0: off)");
+}
+
 void RefinerOptions::validate() const {
-  auto fail = [](const std::string& m) { throw std::invalid_argument("refiner options: " + m); };
-  if (batch_size < 1) fail("batch_size must be >= 1");
-  if (iterations < 0) fail("iterations must be >= 0");
-  if (!(lr_low > 0) || !(lr_high >= lr_low)) fail("need 0 < lr_low <= lr_high");
-  if (!(lr_decay > 0) || lr_decay > 1) fail("lr_decay must be in (0, 1]");
-  if (!(image_scale > 0) || image_scale > 4) fail("image_scale must be in (0, 4]");
-  if (!(coarse_fraction >= 0) || !(coarse_fraction < 1)) fail("coarse_fraction must be in [0, 1)");
-  if (!(coarse_scale > 0) || !(coarse_scale <= 1)) fail("coarse_scale must be in (0, 1]");
-  if (loss.weight_rgb < 0 || loss.weight_depth < 0 || loss.weight_mask < 0 || loss.weight_edges < 0)
-    fail("loss weights must be >= 0");
-  if (!(loss.edge_scale > 0)) fail("loss.edge_scale must be > 0");
-  if (!(loss.depth_truncation > 0)) fail("loss.depth_truncation must be > 0");
-  if (early_stop_patience < 0) fail("early_stop_patience must be >= 0");
-  if (!(render.lod_pixel_error >= 0) || render.lod_pixel_error > 100)
-    fail("render.lod_pixel_error must be in [0, 100] pixels (0: always the full mesh)");
-  if (device != "cpu" && device != "cuda" && device != "auto") fail("device must be auto, cpu or cuda");
+  const OptionRange check{"refiner options"};
+  check("batch_size", batch_size, 1, kMaxBatchSize);
+  check("iterations", iterations, 0, kMaxIterations);
+  check.above("lr_low", lr_low, 0, 10);
+  check.above("lr_high", lr_high, 0, 10);
+  if (lr_high < lr_low) check.fail("lr_high must be >= lr_low");
+  check.above("lr_decay", lr_decay, 0, 1);
+  check("image_scale", image_scale, kMinImageScale, 4);
+  if (!(coarse_fraction >= 0 && coarse_fraction < 1)) check.fail("coarse_fraction must be in [0, 1)");
+  check("coarse_scale", coarse_scale, 0.05, 1);
+  if (coarse_fraction > 0 && image_scale * coarse_scale < kMinImageScale) {
+    std::ostringstream m;
+    m << "image_scale * coarse_scale = " << image_scale * coarse_scale << " is below " << kMinImageScale;
+    check.fail(m.str());
+  }
+  check("early_stop_patience", early_stop_patience, 0, kMaxIterations, " iterations (0: off)");
+  check("early_stop_tolerance", early_stop_tolerance, 0, 1);
+  check("no_mask_window", no_mask_window, 0, 10);
+  check.above("inlier_threshold", inlier_threshold, 0, 10, " metres");
+  check("min_mask_iou", min_mask_iou, 0, 1);
+  check("min_depth_inliers", min_depth_inliers, 0, 1);
+  if (device != "cpu" && device != "cuda" && device != "auto") check.fail("device must be auto, cpu or cuda");
+  loss.validate();
+  render.validate();
+}
+
+void TrackOptions::validate() const {
+  const OptionRange check{"tracking options"};
+  check("max_detection_age", max_detection_age, 0, 3600, " seconds");
+  check("track_timeout", track_timeout, 0, 3600, " seconds");
+  check("max_track_failures", max_failures, 1, 1000);
+  check("max_extrapolation", max_extrapolation, 0, 100, " intervals");
 }
 
 }  // namespace diffdope

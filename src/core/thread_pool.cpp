@@ -1,10 +1,25 @@
 #include "diffdope/thread_pool.hpp"
 
+#include <stdexcept>
+#include <string>
+
 namespace diffdope {
 
 ThreadPool::ThreadPool(int threads) {
   if (threads <= 0) threads = static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
-  for (int i = 1; i < threads; ++i) workers_.emplace_back([this, i] { worker_loop(i); });
+  try {
+    for (int i = 1; i < threads; ++i) workers_.emplace_back([this, i] { worker_loop(i); });
+  } catch (const std::exception& e) {  // (the system's thread limit): stop the workers already started
+    const size_t started = workers_.size();
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      stop_ = true;
+    }
+    wake_.notify_all();
+    for (auto& w : workers_) w.join();
+    throw std::runtime_error("thread pool: could not start " + std::to_string(threads) + " threads (" +
+                             std::to_string(started + 1) + " started): " + e.what());
+  }
 }
 
 ThreadPool::~ThreadPool() {

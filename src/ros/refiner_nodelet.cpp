@@ -3,6 +3,8 @@
 // Parameters and topics: README.md ("ROS node").
 #include "diffdope_ros/refiner_nodelet.hpp"
 
+#include "diffdope/option_range.hpp"
+
 #include <boost/bind/bind.hpp>
 #include <pluginlib/class_list_macros.hpp>
 #include <ros/package.h>
@@ -69,7 +71,7 @@ void RefinerNodelet::loadParameters() {
   }
   use_depth_ = pnh.param("use_depth", true);
   use_mask_ = pnh.param("use_mask", false);
-  queue_size_ = std::max(1, pnh.param("queue_size", 10));
+  queue_size_ = pnh.param("queue_size", 10);
   max_interval_ = pnh.param("max_interval", 0.1);
   sync_timeout_ = pnh.param("sync_timeout", 3.0);
   tf_timeout_ = pnh.param("tf_timeout", 0.1);
@@ -82,9 +84,24 @@ void RefinerNodelet::loadParameters() {
   track_options_.tracking = mode_ != Mode::kContinuous;
   track_options_.max_detection_age = pnh.param("max_detection_age", 1.0);
   track_options_.track_timeout = pnh.param("track_timeout", 3.0);
-  track_options_.max_failures = std::max(1, pnh.param("max_track_failures", 2));
+  track_options_.max_failures = pnh.param("max_track_failures", 2);
   track_options_.predict = pnh.param("predict_motion", true);
-  errors_.set_throttle_period(pnh.param("error_throttle", 5.0));
+  const double error_throttle = pnh.param("error_throttle", 5.0);
+  // Out of range: a configuration error (loadObjects() reports it; nothing is refined), the inputs still set up
+  // with the defaults so that their counts and diagnostics keep working.
+  try {
+    const diffdope::OptionRange check{"parameters"};
+    check("~queue_size", queue_size_, 1, 1000, " messages");
+    check.above("~max_interval", max_interval_, 0, 10, " seconds");
+    check("~sync_timeout", sync_timeout_, 0, 3600, " seconds");
+    check("~tf_timeout", tf_timeout_, 0, 60, " seconds");
+    check("~error_throttle", error_throttle, 0, 3600, " seconds");
+    track_options_.validate();
+    errors_.set_throttle_period(error_throttle);
+  } catch (const std::invalid_argument& e) {
+    parameter_error_ = e.what();
+    queue_size_ = 10, max_interval_ = 0.1, sync_timeout_ = 3.0, tf_timeout_ = 0.1;
+  }
 }
 
 void RefinerNodelet::loadObjects() {
@@ -94,6 +111,7 @@ void RefinerNodelet::loadObjects() {
   const diffdope::PackageResolver resolver = [](const std::string& pkg) { return ros::package::getPath(pkg); };
   diffdope::ObjectsConfig cfg;
   try {
+    if (!parameter_error_.empty()) throw std::invalid_argument(parameter_error_);
     if (objects_path.empty()) throw std::runtime_error("~objects_config is not set (path to the objects YAML)");
     cfg = diffdope::load_objects_config(objects_path, resolver);
     refiner_options_ = cfg.refiner;
