@@ -30,6 +30,19 @@ struct MeshLoadOptions {
   double scale = 1.0;
   /// Colour used when the model has neither texture nor vertex colours, RGB in [0, 1].
   Eigen::Vector3f default_color{0.7f, 0.7f, 0.7f};
+
+  // Hostile files (a corrupt download, a truncated copy) must cost an error, never the process: the file is
+  // checked before the importer sees it (PLY bodies walked, GLB chunks and OBJ material libraries checked) and
+  // imported (assimp) in a child process with a time and memory limit, whose crash is only an error here.
+  bool isolate_import = true;           // false: import in this process (fuzzing, debugging)
+  double import_timeout_s = 60;         // the import child is stopped after this long
+  size_t import_memory_bytes = size_t(4) << 30;  // address space of the import child (not under sanitizers)
+  long long max_vertices = 20000000;    // larger meshes are refused (before anything is allocated for them)
+  long long max_triangles = 20000000;
+  long long max_texture_pixels = 8192LL * 8192;  // larger texture images are refused before decoding
+  /// Textures larger than this on their longer side are downsampled on load (the renderer samples mip levels
+  /// far below it; a whole 8k texture would only be memory). 0 = keep the file's size.
+  int max_texture_size = 4096;
 };
 
 /// A simplified version of a mesh's surface over the mesh's textures: fewer triangles, and only the vertices they

@@ -1,0 +1,300 @@
+// Hostile mesh and texture files (issue 12): a corpus the test writes itself of files that crashed assimp,
+// made it read out of bounds or allocate gigabytes. Each must end in a clear error, with bounded memory, and the
+// test process (a node, in real life) keeps running. Also the child-process isolation itself: a crash, a
+// runaway allocation or a hang inside the import costs only an error.
+#include <gtest/gtest.h>
+
+#include <assimp/Importer.hpp>
+#include <assimp/postprocess.h>
+#include <assimp/scene.h>
+
+#include <signal.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <cstdint>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <functional>
+#include <opencv2/imgcodecs.hpp>
+#include <random>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "diffdope/mesh.hpp"
+#include "isolated_call.hpp"
+
+namespace fs = std::filesystem;
+using namespace diffdope;
+
+namespace {
+
+class HostileFiles : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    std::random_device rd;
+    dir_ = fs::temp_directory_path() /
+           ("diffdope_hostile_" + std::string(::testing::UnitTest::GetInstance()->current_test_info()->name()) +
+            "_" + std::to_string(rd()));
+    fs::create_directories(dir_);
+  }
+  void TearDown() override {
+    std::error_code ec;
+    fs::remove_all(dir_, ec);
+  }
+  std::string write(const std::string& name, const std::string& bytes) const {
+    std::ofstream out(dir_ / name, std::ios::binary);
+    out.write(bytes.data(), std::streamsize(bytes.size()));
+    return (dir_ / name).string();
+  }
+  fs::path dir_;
+};
+
+/// The message Mesh::load gives, "" when it loads.
+std::string load_error(const std::string& path, const MeshLoadOptions& o = {}) {
+  try {
+    Mesh::load(path, o);
+  } catch (const std::runtime_error& e) {
+    return e.what();
+  }
+  return "";
+}
+
+template <typename T>
+void put(std::string& s, T v) {
+  s.append(reinterpret_cast<const char*>(&v), sizeof v);
+}
+
+/// A binary little-endian PLY: `vertices` float xyz vertices, then faces given as (count, indices...) with a
+/// uchar count and int indices, then `tail` bytes as they are.
+std::string binary_ply(int vertices, const std::vector<std::vector<int>>& faces, int declared_faces = -1) {
+  std::string s = "ply\nformat binary_little_endian 1.0\nelement vertex " + std::to_string(vertices) +
+                  "\nproperty float x\nproperty float y\nproperty float z\nelement face " +
+                  std::to_string(declared_faces < 0 ? int(faces.size()) : declared_faces) +
+                  "\nproperty list uchar int vertex_indices\nend_header\n";
+  for (int v = 0; v < vertices; ++v) put(s, float(v % 2)), put(s, float(v / 2 % 2)), put(s, float(v / 4));
+  for (const auto& f : faces) {
+    put(s, uint8_t(f.size()));
+    for (int i : f) put(s, int32_t(i));
+  }
+  return s;
+}
+
+const char* kAsciiHeader =
+    "ply\nformat ascii 1.0\nelement vertex 4\nproperty float x\nproperty float y\nproperty float z\n"
+    "element face 2\nproperty list uchar int vertex_indices\nend_header\n";
+
+}  // namespace
+
+TEST_F(HostileFiles, ABinaryPlyWithAFaceIndexOutOfRangeIsRefused) {
+  EXPECT_EQ(load_error(write("ok.ply", binary_ply(8, {{0, 1, 2}, {1, 3, 2}}))), "");
+  const std::string m = load_error(write("bad.ply", binary_ply(8, {{0, 1, 2}, {1, 99999, 2}})));
+  EXPECT_NE(m.find("face 1 refers to vertex 99999; the file has 8 vertices"), std::string::npos) << m;
+  const std::string neg = load_error(write("neg.ply", binary_ply(8, {{0, -5, 2}})));
+  EXPECT_NE(neg.find("refers to vertex -5"), std::string::npos) << neg;
+}
+
+/// The corpus of binary PLYs that crash assimp (Debian 12's 5.2) in its own process.
+std::vector<std::string> assimp_crashers(const std::function<std::string(const std::string&, const std::string&)>& write) {
+  std::string trunc = binary_ply(8, {{0, 1, 2}, {1, 3, 2}});
+  trunc.resize(trunc.size() - 6);
+  std::string list255 = binary_ply(8, {{0, 1, 2}}, 2);
+  list255.push_back(char(255));
+  for (int i = 0; i < 40; ++i) put(list255, int32_t(i % 8));
+  return {write("index.ply", binary_ply(8, {{0, 1, 2}, {1, 99999, 2}})), write("trunc.ply", trunc),
+          write("list255.ply", list255)};
+}
+
+TEST_F(HostileFiles, FilesThatCrashAssimpItselfAreOnlyAnErrorForMeshLoad) {
+  const auto files = assimp_crashers([&](const std::string& n, const std::string& b) { return write(n, b); });
+  int crashed = 0;
+  for (const std::string& f : files) {
+    // assimp alone, in a child: these files crash it (which is what a node would have died of).
+    try {
+      run_isolated([&] {
+        Assimp::Importer importer;
+        const aiScene* scene = importer.ReadFile(f, aiProcess_Triangulate | aiProcess_JoinIdenticalVertices);
+        return std::string(scene ? "loaded" : "error");
+      }, {}, "assimp");
+    } catch (const std::runtime_error& e) {
+      crashed += std::string(e.what()).find("crashed") != std::string::npos;
+    }
+    for (bool isolate : {true, false}) {  // our checks refuse them before assimp, isolated or not
+      MeshLoadOptions o;
+      o.isolate_import = isolate;
+      const std::string m = load_error(f, o);
+      EXPECT_NE(m, "") << f;
+      EXPECT_EQ(m.find("crashed"), std::string::npos) << m;
+    }
+  }
+  EXPECT_GE(crashed, 1) << "none of the corpus crashes this assimp any more: the corpus needs new crashers";
+}
+
+TEST_F(HostileFiles, ATruncatedBinaryBodyOrAHugeListCountIsRefused) {
+  std::string s = binary_ply(8, {{0, 1, 2}, {1, 3, 2}});
+  s.resize(s.size() - 6);
+  EXPECT_NE(load_error(write("trunc.ply", s)).find("truncated PLY"), std::string::npos);
+  // A face list count of 255 whose indices are the rest of the file (and beyond).
+  std::string big = binary_ply(8, {{0, 1, 2}});
+  big.push_back(char(255));
+  for (int i = 0; i < 40; ++i) put(big, int32_t(i % 8));
+  const std::string header_fix = "element face 2";
+  big.replace(big.find("element face 1"), header_fix.size(), header_fix);
+  EXPECT_NE(load_error(write("list255.ply", big)).find("truncated PLY"), std::string::npos);
+}
+
+TEST_F(HostileFiles, AsciiPlyGarbageAndBadIndicesAreRefused) {
+  const std::string good = std::string(kAsciiHeader) + "0 0 0\n1 0 0\n0 1 0\n1 1 0\n3 0 1 2\n3 1 3 2\n";
+  EXPECT_EQ(load_error(write("good.ply", good)), "");
+  const std::string garbage =
+      std::string(kAsciiHeader) + "0 0 0\n1 0 0 xx yy zz\n0 1 0\n1 1 0\n3 0 1 2\n3 1 3 2\n";
+  std::string m = load_error(write("garbage.ply", garbage));
+  EXPECT_NE(m.find("PLY body line 2 (vertex 1): more values than the header declares"), std::string::npos) << m;
+  const std::string words = std::string(kAsciiHeader) + "0 0 0\n1 0 0\nnot a number\n1 1 0\n3 0 1 2\n3 1 3 2\n";
+  m = load_error(write("words.ply", words));
+  EXPECT_NE(m.find("expected a number for 'x'"), std::string::npos) << m;
+  const std::string index = std::string(kAsciiHeader) + "0 0 0\n1 0 0\n0 1 0\n1 1 0\n3 0 1 2\n3 1 99999 2\n";
+  m = load_error(write("index.ply", index));
+  EXPECT_NE(m.find("refers to vertex 99999; the file has 4 vertices"), std::string::npos) << m;
+  const std::string two = std::string(kAsciiHeader) + "0 0 0\n1 0 0\n0 1 0\n1 1 0\n2 0 1\n3 1 3 2\n";
+  m = load_error(write("two.ply", two));
+  EXPECT_NE(m.find("a face of 2 vertices"), std::string::npos) << m;
+}
+
+TEST_F(HostileFiles, AGlbWhoseChunkLengthIsHugeIsRefusedBeforeAnyAllocation) {
+  // 872 bytes like the issue's file: a valid header, then a JSON chunk that claims ~4 GB.
+  std::string glb = "glTF";
+  put(glb, uint32_t(2)), put(glb, uint32_t(872));
+  put(glb, uint32_t(0xF0000000u)), glb += "JSON";
+  glb += std::string(872 - glb.size(), ' ');
+  std::string m = load_error(write("huge.glb", glb));
+  EXPECT_NE(m.find("corrupt GLB: a chunk of"), std::string::npos) << m;
+  std::string bad_total = glb;
+  const uint32_t total = 1u << 31;
+  std::memcpy(&bad_total[8], &total, 4);
+  m = load_error(write("total.glb", bad_total));
+  EXPECT_NE(m.find("the header declares"), std::string::npos) << m;
+  m = load_error(write("short.glb", "glTF"));
+  EXPECT_NE(m.find("truncated GLB"), std::string::npos) << m;
+}
+
+TEST_F(HostileFiles, AnObjWhoseMaterialLibraryIsMissingIsAnError) {
+  const std::string obj = "mtllib gone.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl a\nf 1 2 3\n";
+  const std::string m = load_error(write("m.obj", obj));
+  EXPECT_NE(m.find("material library 'gone.mtl' not found"), std::string::npos) << m;
+  write("gone.mtl", "newmtl a\nKd 0.2 0.4 0.6\n");
+  EXPECT_EQ(load_error((dir_ / "m.obj").string()), "");
+}
+
+TEST_F(HostileFiles, AHugeTextureIsRefusedFromItsHeaderAndABigOneIsDownsampled) {
+  const std::string ply_head =
+      "ply\nformat ascii 1.0\ncomment TextureFile tex.png\nelement vertex 3\nproperty float x\nproperty float y\n"
+      "property float z\nproperty float texture_u\nproperty float texture_v\nelement face 1\n"
+      "property list uchar int vertex_indices\nend_header\n0 0 0 0 0\n1 0 0 1 0\n0 1 0 0 1\n3 0 1 2\n";
+  write("m.ply", ply_head);
+  // A PNG whose header says 16384 x 16384: refused before a byte is decoded (7 GB otherwise).
+  std::string png = "\x89PNG\r\n\x1a\n";
+  png += std::string("\0\0\0\x0dIHDR", 8);
+  png += std::string("\0\0\x40\0\0\0\x40\0\x08\x02\0\0\0", 13);
+  png += std::string(4, '\0');  // (CRC: never read)
+  write("tex.png", png);
+  std::string m = load_error((dir_ / "m.ply").string());
+  EXPECT_NE(m.find("16384 x 16384 pixels: more than the limit"), std::string::npos) << m;
+  // A real 300 x 200 texture with a 64-pixel cap: kept at 64 x 43.
+  cv::Mat img(200, 300, CV_8UC3, cv::Scalar(10, 200, 30));
+  ASSERT_TRUE(cv::imwrite((dir_ / "tex.png").string(), img));
+  MeshLoadOptions o;
+  o.max_texture_size = 64;
+  const Mesh mesh = Mesh::load((dir_ / "m.ply").string(), o);
+  ASSERT_EQ(mesh.textures.size(), 1u);
+  EXPECT_EQ(mesh.textures[0].width, 64);
+  EXPECT_EQ(mesh.textures[0].height, 43);
+  EXPECT_NEAR(mesh.textures[0].rgb[1], 200 / 255.f, 1e-3);  // (RGB order: green)
+}
+
+TEST_F(HostileFiles, TooManyVerticesAreRefusedFromTheHeader) {
+  MeshLoadOptions o;
+  o.max_vertices = 4;
+  const std::string m = load_error(write("big.ply", binary_ply(8, {{0, 1, 2}})), o);
+  EXPECT_NE(m.find("more than the limit"), std::string::npos) << m;
+}
+
+TEST_F(HostileFiles, RandomBytesUnderEveryExtensionEndInAnError) {
+  std::mt19937 rng(7);
+  for (const char* ext : {".ply", ".obj", ".glb", ".gltf", ".stl", ".dae", ".off"}) {
+    for (int k = 0; k < 4; ++k) {
+      std::string junk(256 + 512 * k, '\0');
+      for (char& c : junk) c = char(rng());
+      if (k == 1 && std::string(ext) == ".ply") junk.replace(0, 4, "ply\n");
+      if (k == 1 && std::string(ext) == ".glb") junk.replace(0, 4, "glTF");
+      const std::string path = write(std::string("junk") + std::to_string(k) + ext, junk);
+      EXPECT_NE(load_error(path), "") << path << " loaded";
+    }
+  }
+}
+
+// ---- the isolation itself ----
+
+TEST(IsolatedCall, ReturnsTheChildsAnswerOrItsError) {
+  EXPECT_EQ(run_isolated([] { return std::string("abc\0def", 7); }, {}, "test"), std::string("abc\0def", 7));
+  try {
+    run_isolated([]() -> std::string { throw std::runtime_error("no such thing"); }, {}, "test");
+    FAIL();
+  } catch (const std::runtime_error& e) {
+    EXPECT_STREQ(e.what(), "no such thing");
+  }
+  // A big answer (more than a pipe holds) arrives whole.
+  const std::string big = run_isolated([] { return std::string(5 << 20, 'x'); }, {}, "test");
+  EXPECT_EQ(big.size(), size_t(5 << 20));
+}
+
+TEST(IsolatedCall, ACrashInTheChildIsAnErrorHere) {
+  try {
+    run_isolated([]() -> std::string {
+      ::raise(SIGSEGV);
+      return "";
+    }, {}, "importing");
+    FAIL();
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("importing: crashed (signal 11"), std::string::npos) << e.what();
+  }
+  try {
+    run_isolated([]() -> std::string { std::abort(); }, {}, "importing");
+    FAIL();
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("signal 6"), std::string::npos) << e.what();
+  }
+}
+
+TEST(IsolatedCall, AHangingChildIsStoppedAtTheTimeLimit) {
+  IsolationLimits l;
+  l.timeout_s = 0.5;
+  const auto t0 = std::chrono::steady_clock::now();
+  try {
+    run_isolated([]() -> std::string {
+      for (;;) std::this_thread::sleep_for(std::chrono::seconds(1));
+    }, l, "importing");
+    FAIL();
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("took longer than"), std::string::npos) << e.what();
+  }
+  EXPECT_LT(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(), 10.0);
+}
+
+#if !defined(__SANITIZE_ADDRESS__)
+TEST(IsolatedCall, ARunawayAllocationInTheChildHitsItsMemoryLimit) {
+  IsolationLimits l;
+  l.address_space_bytes = size_t(1) << 30;
+  try {
+    run_isolated([]() -> std::string {
+      std::vector<std::string> hog;
+      for (;;) hog.emplace_back(size_t(64) << 20, 'x');  // 64 MB at a time, touched
+    }, l, "importing");
+    FAIL();
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("ran out of memory"), std::string::npos) << e.what();
+  }
+}
+#endif
