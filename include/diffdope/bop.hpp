@@ -3,6 +3,7 @@
 // mask_visib/) and Diff-DOPE perturbation files. Files are in millimetres; everything returned is in metres.
 #include <map>
 #include <memory>
+#include <set>
 #include <string>
 #include <vector>
 
@@ -36,8 +37,10 @@ struct Perturbation {
 
 class BopDataset {
  public:
-  /// Throws std::runtime_error naming the path when `root/models` or `root/split` is missing.
-  BopDataset(const std::string& root, const std::string& split);
+  /// Throws std::runtime_error naming the path when `root/models` or `root/split` is missing, or when
+  /// `root/models/models_info.json` (which says which objects are symmetric) is missing or malformed.
+  /// `symmetric_ids`: the symmetric objects given another way; models_info.json is then not read.
+  BopDataset(const std::string& root, const std::string& split, const std::set<int>* symmetric_ids = nullptr);
   std::vector<int> scene_ids() const;
   /// Camera and ground truth of one image. Throws std::runtime_error naming the file on malformed JSON.
   BopImage image(int scene_id, int im_id) const;

@@ -1,5 +1,6 @@
 #include "diffdope/bop.hpp"
 
+#include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -47,6 +48,12 @@ Pose pose_mm(const json& e, const std::string& where) {
   }
 }
 
+int object_id(const json& e, const std::string& where) {
+  if (!e.is_object() || !e.contains("obj_id") || !e["obj_id"].is_number_integer())
+    throw std::runtime_error(where + ": an entry without an integer obj_id");
+  return e["obj_id"].get<int>();
+}
+
 cv::Mat imread_checked(const std::string& path, int flags) {
   cv::Mat m = cv::imread(path, flags);
   if (m.empty()) throw std::runtime_error(path + ": missing or unreadable image");
@@ -55,14 +62,32 @@ cv::Mat imread_checked(const std::string& path, int flags) {
 
 }  // namespace
 
-BopDataset::BopDataset(const std::string& root, const std::string& split) : root_(root), split_(split) {
+BopDataset::BopDataset(const std::string& root, const std::string& split, const std::set<int>* symmetric_ids)
+    : root_(root), split_(split) {
   if (!fs::is_directory(root + "/models")) throw std::runtime_error(root + "/models: not a directory");
   if (!fs::is_directory(root + "/" + split)) throw std::runtime_error(root + "/" + split + ": not a directory");
+  if (symmetric_ids) {
+    for (int id : *symmetric_ids) symmetric_[id] = true;
+    return;
+  }
+  // Without it a symmetric object would be scored with ADD (its symmetric poses counted as errors).
   const std::string info = root + "/models/models_info.json";
-  if (fs::exists(info)) {
-    const json j = read_json(info);
-    for (const auto& [key, v] : j.items())
-      symmetric_[std::stoi(key)] = v.contains("symmetries_discrete") || v.contains("symmetries_continuous");
+  if (!fs::exists(info))
+    throw std::runtime_error(info + ": missing; it says which objects are symmetric (scored with ADD-S). Give "
+                                    "the symmetric object ids another way (diffdope_eval --symmetric 1,5 or --symmetric none)");
+  const json j = read_json(info);
+  if (!j.is_object()) throw std::runtime_error(info + ": expected an object keyed by object id");
+  for (const auto& [key, v] : j.items()) {
+    size_t used = 0;
+    int id = -1;
+    try {
+      id = std::stoi(key, &used);
+    } catch (const std::exception&) {
+      used = 0;
+    }
+    if (used != key.size() || id < 0) throw std::runtime_error(info + ": key '" + key + "' is not an object id");
+    if (!v.is_object()) throw std::runtime_error(info + ": object " + key + " is not an object");
+    symmetric_[id] = v.contains("symmetries_discrete") || v.contains("symmetries_continuous");
   }
 }
 
@@ -86,20 +111,29 @@ BopImage BopDataset::image(int scene_id, int im_id) const {
   img.im_id = im_id;
   const std::string key = std::to_string(im_id);
   const json cams = read_json(dir + "/scene_camera.json");
-  if (!cams.contains(key)) throw std::runtime_error(dir + "/scene_camera.json: no entry for image " + key);
-  const auto K = cams[key].at("cam_K").get<std::vector<double>>();
+  if (!cams.is_object() || !cams.contains(key))
+    throw std::runtime_error(dir + "/scene_camera.json: no entry for image " + key);
+  std::vector<double> K;
+  try {
+    K = cams[key].at("cam_K").get<std::vector<double>>();
+    img.depth_scale = cams[key].value("depth_scale", 1.0);
+  } catch (const json::exception& e) {
+    throw std::runtime_error(dir + "/scene_camera.json (image " + key + "): " + e.what());
+  }
   if (K.size() != 9) throw std::runtime_error(dir + "/scene_camera.json: cam_K needs 9 values");
-  img.depth_scale = cams[key].value("depth_scale", 1.0);
+  if (!(img.depth_scale > 0) || !std::isfinite(img.depth_scale))
+    throw std::runtime_error(dir + "/scene_camera.json: depth_scale must be a positive number");
   char name[32];
   std::snprintf(name, sizeof name, "%06d.png", im_id);
   cv::Mat rgb = imread_checked(dir + "/rgb/" + name, cv::IMREAD_COLOR);
   img.camera = Camera(K[0], K[4], K[2], K[5], rgb.cols, rgb.rows);
   const json gts = read_json(dir + "/scene_gt.json");
-  if (gts.contains(key)) {
+  if (gts.is_object() && gts.contains(key)) {
+    if (!gts[key].is_array()) throw std::runtime_error(dir + "/scene_gt.json: image " + key + " is not a list");
     int inst = 0;
     for (const auto& e : gts[key]) {
       BopInstance b;
-      b.obj_id = e.at("obj_id").get<int>();
+      b.obj_id = object_id(e, dir + "/scene_gt.json (image " + key + ")");
       b.inst = inst++;
       b.pose = pose_mm(e, dir + "/scene_gt.json");
       img.gt.push_back(b);
@@ -150,18 +184,20 @@ std::vector<Perturbation> read_perturbations(const std::string& path) {
   if (!j.is_object()) throw std::runtime_error(path + ": expected an object keyed by sample index");
   std::vector<Perturbation> out;
   for (const auto& [key, list] : j.items()) {
-    int sample;
+    int sample = -1;
+    size_t used = 0;
     try {
-      sample = std::stoi(key);
+      sample = std::stoi(key, &used);
     } catch (...) {
-      throw std::runtime_error(path + ": key '" + key + "' is not a sample index");
+      used = 0;
     }
+    if (used != key.size() || sample < 0) throw std::runtime_error(path + ": key '" + key + "' is not a sample index");
     if (!list.is_array()) throw std::runtime_error(path + ": sample " + key + " is not a list");
     std::map<int, int> seen;
     for (const auto& e : list) {
       Perturbation p;
       p.sample = sample;
-      p.obj_id = e.at("obj_id").get<int>();
+      p.obj_id = object_id(e, path + " (sample " + key + ")");
       p.occurrence = seen[p.obj_id]++;
       p.pose = pose_mm(e, path + " (sample " + key + ")");
       out.push_back(p);

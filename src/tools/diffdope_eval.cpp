@@ -8,10 +8,12 @@
 // refined instance and prints a table per level: AUC of ADD(-S) up to 50 mm for initial and refined poses,
 // % under 10 mm and 5 mm, median ms per object.
 #include <algorithm>
+#include <climits>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <iostream>
+#include <limits>
 #include <map>
 #include <nlohmann/json.hpp>
 #include <set>
@@ -31,7 +33,9 @@ namespace {
 int usage(int rc) {
   std::cerr << "usage: diffdope_eval --bop ROOT --split NAME --perturbations DIR --out results.jsonl\n"
                "                     [--levels easy,medium,hard] [--config FILE] [--summary-json FILE]\n"
-               "                     [--threads N] [--max-samples N] [--generate N [--seed S]] [--device auto|cpu|cuda]\n";
+               "                     [--threads N] [--max-samples N] [--generate N [--seed S]] [--device auto|cpu|cuda]\n"
+               "                     [--symmetric ID,ID,...|none]  (instead of ROOT/models/models_info.json)\n"
+               "Exit status: 0 all samples evaluated, 1 an error or some samples skipped, 2 bad arguments.\n";
   return rc;
 }
 
@@ -85,13 +89,29 @@ void write_perturbations(BopDataset& data, const std::string& dir, int samples, 
   }
 }
 
+/// A whole-string integer in [lo, hi] for a command-line flag, or an error naming the flag.
+long long parse_integer(const std::string& flag, const std::string& v, long long lo, long long hi) {
+  size_t used = 0;
+  long long x = 0;
+  try {
+    x = std::stoll(v, &used);
+  } catch (const std::exception&) {
+    used = 0;
+  }
+  if (used != v.size() || v.empty()) throw std::invalid_argument(flag + ": expected an integer, got '" + v + "'");
+  if (x < lo || x > hi)
+    throw std::invalid_argument(flag + ": " + v + " is outside [" + std::to_string(lo) + ", " + std::to_string(hi) + "]");
+  return x;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
-  std::string root, split, pert_dir, out_path, config, summary_path, device;
+  std::string root, split, pert_dir, out_path, config, summary_path, device, symmetric_arg;
   std::set<std::string> levels;
   int threads = 0, max_samples = -1, generate = 0;
   uint64_t seed = 1;
+  try {
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     if (a == "-h" || a == "--help") return usage(0);
@@ -106,18 +126,27 @@ int main(int argc, char** argv) {
     else if (a == "--out") out_path = v;
     else if (a == "--config") config = v;
     else if (a == "--summary-json") summary_path = v;
-    else if (a == "--threads") threads = std::stoi(v);
+    else if (a == "--threads") threads = int(parse_integer(a, v, 0, RenderOptions::kMaxThreads));
     else if (a == "--device") device = v;
-    else if (a == "--max-samples") max_samples = std::stoi(v);
-    else if (a == "--generate") generate = std::stoi(v);
-    else if (a == "--seed") seed = std::stoull(v);
+    else if (a == "--max-samples") max_samples = int(parse_integer(a, v, 0, 1000000));
+    else if (a == "--generate") generate = int(parse_integer(a, v, 0, 100000));
+    else if (a == "--seed") seed = uint64_t(parse_integer(a, v, 0, std::numeric_limits<long long>::max()));
+    else if (a == "--symmetric") symmetric_arg = v;
     else if (a == "--levels") {
       std::stringstream ss(v);
-      for (std::string l; std::getline(ss, l, ',');) levels.insert(l);
+      for (std::string l; std::getline(ss, l, ',');) {
+        if (l != "easy" && l != "medium" && l != "hard")
+          throw std::invalid_argument("--levels: unknown level '" + l + "' (easy, medium, hard)");
+        levels.insert(l);
+      }
     } else {
       std::cerr << "diffdope_eval: unknown option " << a << "\n";
       return usage(2);
     }
+  }
+  } catch (const std::invalid_argument& e) {
+    std::cerr << "diffdope_eval: " << e.what() << "\n";
+    return 2;
   }
   if (root.empty() || split.empty() || pert_dir.empty() || out_path.empty()) return usage(2);
 
@@ -128,12 +157,19 @@ int main(int argc, char** argv) {
     options.validate();
     Refiner refiner(options);
     std::cerr << "diffdope_eval: backend " << refiner.backend() << "\n";
-    BopDataset data(root, split);
+    std::set<int> symmetric_ids;  // --symmetric: instead of models_info.json
+    if (!symmetric_arg.empty() && symmetric_arg != "none") {
+      std::stringstream ss(symmetric_arg);
+      for (std::string id; std::getline(ss, id, ',');) symmetric_ids.insert(int(parse_integer("--symmetric", id, 0, INT_MAX)));
+    }
+    BopDataset data(root, split, symmetric_arg.empty() ? nullptr : &symmetric_ids);
+    if (!fs::is_directory(pert_dir) && generate == 0) throw std::runtime_error(pert_dir + ": not a directory");
     if (generate > 0) write_perturbations(data, pert_dir, generate, seed);
     std::ofstream out(out_path);
     if (!out) throw std::runtime_error(out_path + ": cannot write");
 
     std::map<std::string, LevelStats> stats;
+    int skipped = 0, perturbation_files = 0;
     std::vector<std::string> level_order;
     for (int scene : data.scene_ids()) {
       char sname[16];
@@ -148,6 +184,7 @@ int main(int argc, char** argv) {
       for (const fs::path& file : files) {
         const std::string level = perturbation_level(file.string());
         if (!levels.empty() && !levels.count(level)) continue;
+        ++perturbation_files;
         if (!stats.count(level)) level_order.push_back(level);
         LevelStats& st = stats[level];
         for (const Perturbation& p : read_perturbations(file.string())) {
@@ -157,12 +194,15 @@ int main(int argc, char** argv) {
           for (const auto& g : img.gt)
             if (g.obj_id == p.obj_id && k++ == p.occurrence) gt = &g;
           if (!gt) {
-            std::cerr << "warning: " << file.string() << " sample " << p.sample << ": obj " << p.obj_id
+            std::cerr << "\ndiffdope_eval: " << file.string() << " sample " << p.sample << ": obj " << p.obj_id
                       << " has no ground truth in scene " << scene << "; skipped\n";
+            ++skipped;
             continue;
           }
           if (!data.has_model(p.obj_id)) {
-            std::cerr << "warning: no model for obj " << p.obj_id << "; skipped\n";
+            std::cerr << "\ndiffdope_eval: " << file.string() << " sample " << p.sample << ": no model for obj "
+                      << p.obj_id << " in " << root << "/models; skipped\n";
+            ++skipped;
             continue;
           }
           const Mesh& mesh = data.model(p.obj_id);
@@ -214,6 +254,18 @@ int main(int argc, char** argv) {
     }
     row("all", all_init, all_ref, all_ms);
     if (!summary_path.empty()) std::ofstream(summary_path) << summary.dump(2) << "\n";
+    if (all_ref.empty())
+      throw std::runtime_error("nothing was evaluated: " +
+                               (perturbation_files == 0 ? "no perturbation files (" + pert_dir +
+                                                              "/<scene>/scene_error_*.json) for the scenes of " +
+                                                              root + "/" + split +
+                                                              (levels.empty() ? std::string() : " at the levels asked for")
+                                                        : std::to_string(skipped) + " samples, all skipped"));
+    if (skipped > 0) {
+      std::cerr << "diffdope_eval: " << skipped << " of " << skipped + all_ref.size()
+                << " samples were skipped (see above); the figures leave them out\n";
+      return 1;
+    }
   } catch (const std::exception& e) {
     std::cerr << "diffdope_eval: " << e.what() << "\n";
     return 1;

@@ -89,3 +89,48 @@ TEST(ToolsEndToEnd, EvalReportsMissingDatasetClearly) {
   EXPECT_NE(text.find("/nonexistent/bop"), std::string::npos) << text;
   EXPECT_EQ(run(std::string(DIFFDOPE_EVAL_EXE) + " --bop x > /dev/null 2>&1"), 2);  // usage error
 }
+
+// Issue 12: an evaluation that evaluated nothing, or scored a symmetric object without knowing it is, must not
+// look like a success.
+TEST(ToolsEndToEnd, EvalFailsLoudlyWhenItCannotEvaluateEverything) {
+  TempDir tmp;
+  const std::string root = (tmp.path / "bop").string();
+  ASSERT_EQ(run(std::string(DIFFDOPE_MAKE_DATASET_EXE) + " --out " + root +
+                " --scenes 1 --width 160 --height 120 --seed 5 2>/dev/null"), 0);
+  const std::string cfg = (tmp.path / "tiny.yaml").string();
+  std::ofstream(cfg) << "batch_size: 2\niterations: 2\nimage_scale: 1.0\n";
+  const std::string err = (tmp.path / "err.txt").string();
+  const auto eval = [&](const std::string& args) {
+    return run(std::string(DIFFDOPE_EVAL_EXE) + " --bop " + root + " --split test --out " +
+               (tmp.path / "o.jsonl").string() + " --config " + cfg + " " + args + " > /dev/null 2> " + err);
+  };
+  const auto said = [&] {
+    std::ifstream f(err);
+    return std::string((std::istreambuf_iterator<char>(f)), std::istreambuf_iterator<char>());
+  };
+  // No perturbation files at all.
+  fs::create_directories(tmp.path / "empty");
+  EXPECT_EQ(eval("--perturbations " + (tmp.path / "empty").string()), 1);
+  EXPECT_NE(said().find("nothing was evaluated: no perturbation files"), std::string::npos) << said();
+  // A level that does not exist, numbers that are not numbers.
+  EXPECT_EQ(eval("--perturbations " + (tmp.path / "p").string() + " --levels easy,bogus"), 2);
+  EXPECT_NE(said().find("unknown level 'bogus'"), std::string::npos) << said();
+  EXPECT_EQ(eval("--perturbations " + (tmp.path / "p").string() + " --max-samples 3x"), 2);
+  EXPECT_NE(said().find("--max-samples: expected an integer, got '3x'"), std::string::npos) << said();
+  // Works, then a model goes missing: the samples of its object are skipped, said, and the exit status says so.
+  ASSERT_EQ(eval("--perturbations " + (tmp.path / "p").string() + " --generate 1 --levels easy"), 0) << said();
+  fs::rename(root + "/models/obj_000001.ply", root + "/models/obj_000001.ply.gone");
+  EXPECT_EQ(eval("--perturbations " + (tmp.path / "p").string() + " --levels easy"), 1);
+  EXPECT_NE(said().find("no model for obj 1"), std::string::npos) << said();
+  EXPECT_NE(said().find("samples were skipped"), std::string::npos) << said();
+  fs::rename(root + "/models/obj_000001.ply.gone", root + "/models/obj_000001.ply");
+  // Without models_info.json the symmetric objects are unknown: an error, unless given another way.
+  fs::rename(root + "/models/models_info.json", root + "/models/info.bak");
+  EXPECT_EQ(eval("--perturbations " + (tmp.path / "p").string() + " --levels easy"), 1);
+  EXPECT_NE(said().find("models_info.json: missing"), std::string::npos) << said();
+  EXPECT_EQ(eval("--perturbations " + (tmp.path / "p").string() + " --levels easy --symmetric 2"), 0) << said();
+  // A bad key in it is named.
+  std::ofstream(root + "/models/models_info.json") << "{\"1\": {}, \"two\": {}}";
+  EXPECT_EQ(eval("--perturbations " + (tmp.path / "p").string() + " --levels easy"), 1);
+  EXPECT_NE(said().find("key 'two' is not an object id"), std::string::npos) << said();
+}
