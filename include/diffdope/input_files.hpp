@@ -1,0 +1,29 @@
+#pragma once
+// The small input files a user hands to the tools: camera intrinsics and an initial pose (JSON / YAML). Every
+// problem is an InputFileError naming the file and saying what is wrong, e.g.
+//   camera.json: 'cam_K' needs 9 values, found 6
+#include <stdexcept>
+#include <string>
+
+#include "diffdope/camera.hpp"
+#include "diffdope/pose.hpp"
+
+namespace diffdope {
+
+/// An input that cannot be used; `file` is the file (or folder) to name in the message.
+struct InputFileError : std::runtime_error {
+  std::string file;
+  InputFileError(std::string f, const std::string& what) : std::runtime_error(what), file(std::move(f)) {}
+};
+
+/// Intrinsics from .json or .yaml/.yml: fx, fy, cx, cy[, width, height] (ROS: image_width, image_height), or a
+/// 3x3 matrix as BOP's cam_K (9 values, row-major), K / k or camera_matrix ({data: [...]} as ROS's yaml); a BOP
+/// scene_camera.json with a single image. The size is the image's; a size in the file must match it.
+Camera read_camera_file(const std::string& path, int image_width, int image_height);
+
+/// Model-to-camera pose (metres) from JSON: {"R": [9 row-major], "t": [3]}, {"quaternion": [x, y, z, w],
+/// "t": [3]} or {"matrix": [16 row-major] or [[4] x 4]}. The rotation must be orthonormal to 1e-3 (then it is
+/// re-orthonormalised) and not a reflection.
+Pose read_pose_file(const std::string& path);
+
+}  // namespace diffdope
