@@ -39,6 +39,7 @@
 #include "diffdope_ros/InitialPoseArray.h"
 #include "diffdope_ros/Refine.h"
 #include "diffdope_ros/RefinedPoseArray.h"
+#include "diffdope_ros/checked_input.hpp"
 #include "diffdope_ros/error_reporter.hpp"
 
 namespace diffdope_ros {
@@ -152,6 +153,9 @@ class RefinerNodelet : public nodelet::Nodelet {
   std::unique_ptr<image_transport::ImageTransport> it_;
   image_transport::SubscriberFilter rgb_sub_, depth_sub_, mask_sub_;
   message_filters::Subscriber<sensor_msgs::CameraInfo> info_sub_;
+  // Each input checked on its own before the synchronizer (encoding, size, step; intrinsics).
+  CheckedInput<sensor_msgs::Image> rgb_in_, depth_in_, mask_in_;
+  CheckedInput<sensor_msgs::CameraInfo> info_in_;
   using Policy2 = message_filters::sync_policies::ApproximateTime<sensor_msgs::Image, sensor_msgs::CameraInfo>;
   using Policy3 = message_filters::sync_policies::ApproximateTime<sensor_msgs::Image, sensor_msgs::CameraInfo,
                                                                   sensor_msgs::Image>;
@@ -193,10 +197,14 @@ class RefinerNodelet : public nodelet::Nodelet {
     ros::WallTime first_refined, last_refined;
   } stats_;
   ros::WallTime last_arrival_[4];  // rgb, info, depth, mask (wall time of the last message of each)
+  struct InputCounts {
+    long received = 0, malformed = 0, synchronized = 0;
+  } input_counts_[4];              // (arrival_mutex_)
   ros::Time last_stamp_[4];
   ros::WallTime last_sync_;
   std::mutex arrival_mutex_;
   void noteArrival(int index, const std_msgs::Header& header);
+  void rejectInput(int index, const std::string& reason);
 };
 
 }  // namespace diffdope_ros

@@ -36,6 +36,13 @@ std::string lower(std::string s) {
   return s;
 }
 
+/// A value for a message: bytes that are not UTF-8 (a YAML file may hold any) replaced, long ones cut.
+std::string shown(const json& v) {
+  std::string s = v.dump(-1, ' ', false, json::error_handler_t::replace);
+  if (s.size() > 80) s = s.substr(0, 77) + "...";
+  return s;
+}
+
 std::string size_str(int w, int h) { return std::to_string(w) + "x" + std::to_string(h); }
 
 json read_json_file(const std::string& path) {
@@ -90,9 +97,9 @@ std::vector<double> numbers(const json& j, const std::string& key, const std::st
   std::vector<double> out;
   const json& v = (j.is_object() && j.contains("data")) ? j.at("data") : j;
   auto add = [&](const json& x) {
-    if (!x.is_number()) fail(file, "'" + key + "' must hold numbers, found " + x.dump());
+    if (!x.is_number()) fail(file, "'" + key + "' must hold numbers, found " + shown(x));
     const double d = x.get<double>();
-    if (!std::isfinite(d)) fail(file, "'" + key + "' holds a value that is not finite (" + x.dump() + ")");
+    if (!std::isfinite(d)) fail(file, "'" + key + "' holds a value that is not finite (" + shown(x) + ")");
     out.push_back(d);
   };
   if (v.is_number()) {
@@ -106,7 +113,7 @@ std::vector<double> numbers(const json& j, const std::string& key, const std::st
       }
     }
   } else {
-    fail(file, "'" + key + "' must be a number or an array of numbers, found " + v.dump());
+    fail(file, "'" + key + "' must be a number or an array of numbers, found " + shown(v));
   }
   return out;
 }

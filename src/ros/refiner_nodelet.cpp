@@ -172,30 +172,31 @@ void RefinerNodelet::setupInputs() {
   info_sub_.subscribe(nh, "rgb/camera_info", queue_size_);
   if (use_depth_) depth_sub_.subscribe(*it_, "depth/image_rect", queue_size_, hints);
   if (use_mask_) mask_sub_.subscribe(*it_, "mask", queue_size_, hints);
-  rgb_sub_.registerCallback(boost::function<void(const sensor_msgs::ImageConstPtr&)>(
-      [this](const sensor_msgs::ImageConstPtr& m) { noteArrival(0, m->header); }));
-  info_sub_.registerCallback(boost::function<void(const sensor_msgs::CameraInfoConstPtr&)>(
-      [this](const sensor_msgs::CameraInfoConstPtr& m) { noteArrival(1, m->header); }));
-  if (use_depth_)
-    depth_sub_.registerCallback(boost::function<void(const sensor_msgs::ImageConstPtr&)>(
-        [this](const sensor_msgs::ImageConstPtr& m) { noteArrival(2, m->header); }));
-  if (use_mask_)
-    mask_sub_.registerCallback(boost::function<void(const sensor_msgs::ImageConstPtr&)>(
-        [this](const sensor_msgs::ImageConstPtr& m) { noteArrival(3, m->header); }));
+  using sensor_msgs::CameraInfo;
+  using sensor_msgs::Image;
+  const auto arrive = [this](int index) { return [this, index](const auto& m) { noteArrival(index, m.header); }; };
+  const auto reject = [this](int index) { return [this, index](const std::string& why) { rejectInput(index, why); }; };
+  rgb_in_.connect(rgb_sub_, arrive(0), [](const Image& m) {
+    if (m.header.frame_id.empty()) throw std::invalid_argument("rgb image: empty header.frame_id");
+    check_rgb_image(m);
+  }, reject(0));
+  info_in_.connect(info_sub_, arrive(1), [](const CameraInfo& m) { camera_from_info(m); }, reject(1));
+  if (use_depth_) depth_in_.connect(depth_sub_, arrive(2), [](const Image& m) { check_depth_image(m); }, reject(2));
+  if (use_mask_) mask_in_.connect(mask_sub_, arrive(3), [](const Image& m) { check_labels_image(m); }, reject(3));
 
   const ros::Duration max_interval(std::max(0.0, max_interval_));
   if (use_depth_ && use_mask_) {
-    sync4_ = std::make_unique<message_filters::Synchronizer<Policy4>>(Policy4(queue_size_), rgb_sub_, info_sub_,
-                                                                       depth_sub_, mask_sub_);
+    sync4_ = std::make_unique<message_filters::Synchronizer<Policy4>>(Policy4(queue_size_), rgb_in_, info_in_,
+                                                                       depth_in_, mask_in_);
     if (max_interval_ > 0) sync4_->setMaxIntervalDuration(max_interval);
     sync4_->registerCallback(&RefinerNodelet::onSync4, this);
   } else if (use_depth_ || use_mask_) {
-    sync3_ = std::make_unique<message_filters::Synchronizer<Policy3>>(Policy3(queue_size_), rgb_sub_, info_sub_,
-                                                                       use_depth_ ? depth_sub_ : mask_sub_);
+    sync3_ = std::make_unique<message_filters::Synchronizer<Policy3>>(Policy3(queue_size_), rgb_in_, info_in_,
+                                                                       use_depth_ ? depth_in_ : mask_in_);
     if (max_interval_ > 0) sync3_->setMaxIntervalDuration(max_interval);
     sync3_->registerCallback(&RefinerNodelet::onSync3, this);
   } else {
-    sync2_ = std::make_unique<message_filters::Synchronizer<Policy2>>(Policy2(queue_size_), rgb_sub_, info_sub_);
+    sync2_ = std::make_unique<message_filters::Synchronizer<Policy2>>(Policy2(queue_size_), rgb_in_, info_in_);
     if (max_interval_ > 0) sync2_->setMaxIntervalDuration(max_interval);
     sync2_->registerCallback(&RefinerNodelet::onSync2, this);
   }
@@ -218,6 +219,7 @@ RefinerNodelet::~RefinerNodelet() {
   watchdog_timer_.stop();
   if (service_spinner_) service_spinner_->stop();
   refine_srv_.shutdown();
+  rgb_in_.disconnect(), info_in_.disconnect(), depth_in_.disconnect(), mask_in_.disconnect();
   rgb_sub_.unsubscribe();
   info_sub_.unsubscribe();
   depth_sub_.unsubscribe();
@@ -234,9 +236,19 @@ RefinerNodelet::~RefinerNodelet() {
 
 void RefinerNodelet::noteArrival(int index, const std_msgs::Header& header) {
   std::lock_guard<std::mutex> lock(arrival_mutex_);
+  ++input_counts_[index].received;
   last_arrival_[index] = ros::WallTime::now();
   if (index == 0 && first_arrival_.isZero()) first_arrival_ = last_arrival_[index];
   last_stamp_[index] = header.stamp;
+}
+
+void RefinerNodelet::rejectInput(int index, const std::string& reason) {
+  {
+    std::lock_guard<std::mutex> lock(arrival_mutex_);
+    ++input_counts_[index].malformed;
+  }
+  // Throttled per input; reason reads "<input> image: problem".
+  errors_.error(std::string("input/") + kInputNames[index], std::string(kInputNames[index]) + " message dropped: " + reason);
 }
 
 void RefinerNodelet::onSync2(const sensor_msgs::ImageConstPtr& rgb, const sensor_msgs::CameraInfoConstPtr& info) {
@@ -259,13 +271,15 @@ void RefinerNodelet::onImages(const sensor_msgs::ImageConstPtr& rgb, const senso
   {
     std::lock_guard<std::mutex> lock(arrival_mutex_);
     last_sync_ = ros::WallTime::now();
+    ++input_counts_[0].synchronized, ++input_counts_[1].synchronized;
+    if (depth) ++input_counts_[2].synchronized;
+    if (mask) ++input_counts_[3].synchronized;
   }
   auto frame = std::make_shared<Frame>();
   frame->received = ros::WallTime::now();
   frame->header = rgb->header;
   frame->rgb_msg = rgb;
-  try {
-    if (rgb->header.frame_id.empty()) throw std::invalid_argument("rgb image: empty header.frame_id");
+  try {  // (each message passed its own checks before the synchronizer: CheckedInput)
     std::string warning;
     frame->camera = camera_from_info(*info, &warning);
     if (!warning.empty()) errors_.warn("camera_info_k", warning);
@@ -284,7 +298,6 @@ void RefinerNodelet::onImages(const sensor_msgs::ImageConstPtr& rgb, const senso
       throw std::invalid_argument("rgb image is " + std::to_string(rgb->width) + "x" + std::to_string(rgb->height) +
                                   " but camera_info says " + std::to_string(info->width) + "x" +
                                   std::to_string(info->height));
-    check_rgb_image(*rgb);
     auto same_size = [&](const sensor_msgs::Image& im, const char* what) {
       if (im.width != rgb->width || im.height != rgb->height)
         throw std::invalid_argument(std::string(what) + " image is " + std::to_string(im.width) + "x" +
@@ -293,12 +306,10 @@ void RefinerNodelet::onImages(const sensor_msgs::ImageConstPtr& rgb, const senso
     };
     if (depth) {
       same_size(*depth, "depth");
-      check_depth_image(*depth);
       frame->depth_msg = depth;
     }
     if (mask) {
       same_size(*mask, "mask");
-      check_labels_image(*mask);
       frame->mask_msg = mask;
     }
   } catch (const std::exception& e) {
@@ -369,7 +380,7 @@ bool RefinerNodelet::onRefineService(diffdope_ros::Refine::Request& req, diffdop
 void RefinerNodelet::onWatchdog(const ros::WallTimerEvent&) {
   // Inputs that arrive but never form a synchronized set (a silent topic, stamps too far apart) are an error.
   const ros::WallTime now = ros::WallTime::now();
-  std::lock_guard<std::mutex> lock(arrival_mutex_);
+  std::unique_lock<std::mutex> lock(arrival_mutex_);
   const bool rgb_recent = !last_arrival_[0].isZero() && (now - last_arrival_[0]).toSec() < 1.5;
   // Before any synchronized set, count from the first rgb message (a silent depth or mask topic).
   const double since_sync = last_sync_.isZero() ? (now - first_arrival_).toSec() : (now - last_sync_).toSec();
@@ -388,6 +399,7 @@ void RefinerNodelet::onWatchdog(const ros::WallTimerEvent&) {
         << (use_depth_ ? ", " + depth_sub_.getTopic() : "") << (use_mask_ ? ", " + mask_sub_.getTopic() : "") << ")";
     errors_.error("sync", msg.str());
   }
+  lock.unlock();  // (onDiagnostics takes it too)
   // force_update: this timer already paces it (1 s of wall time). update() gates on ros::Time, which under sim
   // time stops publishing after the clock jumps back (a looped bag) until it catches up again.
   if (diagnostics_) diagnostics_->force_update();
@@ -413,6 +425,20 @@ void RefinerNodelet::onDiagnostics(diagnostic_updater::DiagnosticStatusWrapper& 
   for (const auto& slot : slots_)
     stat.add("object " + slot->config.name,
              slot->mesh ? (slot->tracking ? "tracking" : "waiting for a pose") : "disabled: " + slot->disabled_reason);
+  {
+    // Every message of every input: synchronized, malformed (dropped with its reason before the synchronizer), or
+    // never matched by the other inputs (stamps too far apart, a silent topic; up to ~queue_size still waiting).
+    std::lock_guard<std::mutex> lock(arrival_mutex_);
+    const bool used[4] = {true, true, use_depth_, use_mask_};
+    for (int i = 0; i < 4; ++i) {
+      if (!used[i]) continue;
+      const InputCounts& c = input_counts_[i];
+      stat.add(std::string("input ") + kInputNames[i],
+               "received " + std::to_string(c.received) + ", synchronized " + std::to_string(c.synchronized) +
+                   ", malformed " + std::to_string(c.malformed) + ", unmatched " +
+                   std::to_string(std::max(0L, c.received - c.synchronized - c.malformed)));
+    }
+  }
   stat.add("frames synchronized", s.frames_synced);
   stat.add("frames refined", s.frames_refined);
   stat.add("frames skipped (worker busy)", s.frames_skipped);

@@ -1,6 +1,7 @@
 // Writes the seed corpora of the fuzz targets (scripts/fuzz): small valid inputs of every form each parser takes,
 // made here so that the project needs no downloaded corpus. Usage: make_seeds OUT_DIR REPO_DIR
 #include <cstdint>
+#include <algorithm>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
@@ -82,20 +83,18 @@ void mesh_seeds() {
   for (float v : {0.f, 0.f, 0.f, 1.f, 0.f, 0.f, 0.f, 1.f, 0.f}) put(bin, v);
   for (float v : {0.f, 0.f, 1.f, 0.f, 0.f, 1.f}) put(bin, v);
   for (uint16_t i : {0, 1, 2, 0}) put(bin, i);
-  json g = {{"asset", {{"version", "2.0"}}}, {"scene", 0}, {"scenes", {{{"nodes", {0}}}}},
-            {"nodes", {{{"mesh", 0}, {"translation", {0.0, 0.0, 1.0}}}}},
-            {"meshes", {{{"primitives", {{{"attributes", {{"POSITION", 0}, {"TEXCOORD_0", 1}}}, {"indices", 2},
-                                          {"material", 0}}}}}}}},
-            {"materials", {{{"pbrMetallicRoughness", {{"baseColorFactor", {0.5, 0.25, 1.0, 1.0}}}}}}},
-            {"bufferViews", {{{"buffer", 0}, {"byteOffset", 0}, {"byteLength", 36}},
-                             {{"buffer", 0}, {"byteOffset", 36}, {"byteLength", 24}},
-                             {{"buffer", 0}, {"byteOffset", 60}, {"byteLength", 6}}}},
-            {"accessors", {{{"bufferView", 0}, {"componentType", 5126}, {"count", 3}, {"type", "VEC3"},
-                            {"min", {0.0, 0.0, 0.0}}, {"max", {1.0, 1.0, 0.0}}},
-                           {{"bufferView", 1}, {"componentType", 5126}, {"count", 3}, {"type", "VEC2"}},
-                           {{"bufferView", 2}, {"componentType", 5123}, {"count", 3}, {"type", "SCALAR"}}}}};
+  json g = json::parse(R"({
+    "asset": {"version": "2.0"}, "scene": 0, "scenes": [{"nodes": [0]}],
+    "nodes": [{"mesh": 0, "translation": [0, 0, 1]}],
+    "meshes": [{"primitives": [{"attributes": {"POSITION": 0, "TEXCOORD_0": 1}, "indices": 2, "material": 0}]}],
+    "materials": [{"pbrMetallicRoughness": {"baseColorFactor": [0.5, 0.25, 1.0, 1.0]}}],
+    "bufferViews": [{"buffer": 0, "byteOffset": 0, "byteLength": 36}, {"buffer": 0, "byteOffset": 36, "byteLength": 24},
+                    {"buffer": 0, "byteOffset": 60, "byteLength": 6}],
+    "accessors": [{"bufferView": 0, "componentType": 5126, "count": 3, "type": "VEC3", "min": [0, 0, 0], "max": [1, 1, 0]},
+                  {"bufferView": 1, "componentType": 5126, "count": 3, "type": "VEC2"},
+                  {"bufferView": 2, "componentType": 5123, "count": 3, "type": "SCALAR"}]})");
   json gb = g;
-  gb["buffers"] = {{{"byteLength", bin.size()}}};
+  gb["buffers"] = json::array({{{"byteLength", bin.size()}}});
   std::string js = gb.dump();
   while (js.size() % 4) js += ' ';
   std::string glb = "glTF";
@@ -112,7 +111,7 @@ void mesh_seeds() {
     enc += i + 1 < bin.size() ? b64[n >> 6 & 63] : '=';
     enc += i + 2 < bin.size() ? b64[n & 63] : '=';
   }
-  g["buffers"] = {{{"byteLength", bin.size()}, {"uri", "data:application/octet-stream;base64," + enc}}};
+  g["buffers"] = json::array({{{"byteLength", bin.size()}, {"uri", "data:application/octet-stream;base64," + enc}}});
   seed("mesh_gltf", "triangle.gltf", g.dump(1));
 }
 

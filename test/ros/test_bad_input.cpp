@@ -217,6 +217,47 @@ TEST(BadInput, EachBadMessageIsReported) {
   EXPECT_EQ(n.refined_arrays, 0);
 }
 
+/// The count after `what` in the diagnostics line "input NAME: received R, synchronized S, malformed M, ..."
+/// (-1 when absent).
+long input_count(const std::string& diagnostics, const std::string& name, const std::string& what) {
+  const size_t line = diagnostics.find("input " + name + ": ");
+  if (line == std::string::npos) return -1;
+  const size_t at = diagnostics.find(what + " ", line);
+  if (at == std::string::npos || at > diagnostics.find('\n', line)) return -1;
+  return std::stol(diagnostics.substr(at + what.size() + 1));
+}
+
+// Issue 12: a malformed message whose partners never arrive does not reach the synchronizer's callback: it must
+// still be counted and reported with its reason.
+TEST(BadInput, MalformedMessagesThatNeverSynchronizeAreCountedAndReported) {
+  Node& n = *node;
+  long before = -1;
+  for (int i = 0; i < 50 && before < 0; ++i) {
+    ros::WallDuration(0.1).sleep();
+    std::lock_guard<std::mutex> l(n.mutex);
+    before = input_count(n.diagnostics_text, "depth", "malformed");
+  }
+  ASSERT_GE(before, 0) << "no 'input depth' line in the diagnostics:\n" << n.diagnostics_text;
+  auto depth = n.good_depth;
+  depth.encoding = "mono8";
+  for (int i = 0; i < 5; ++i) {
+    depth.header.stamp = ros::Time::now() - ros::Duration(100.0 + i);  // no rgb near it: never synchronized
+    n.depth.publish(depth);
+    ros::WallDuration(0.05).sleep();
+  }
+  n.waitForError("depth message dropped: depth image: unsupported encoding 'mono8'");
+  long after = before;
+  for (int i = 0; i < 60 && after < before + 5; ++i) {
+    ros::WallDuration(0.1).sleep();
+    std::lock_guard<std::mutex> l(n.mutex);
+    after = input_count(n.diagnostics_text, "depth", "malformed");
+  }
+  EXPECT_EQ(after, before + 5) << n.diagnostics_text;
+  std::lock_guard<std::mutex> l(n.mutex);
+  EXPECT_GE(input_count(n.diagnostics_text, "rgb", "received"), input_count(n.diagnostics_text, "rgb", "synchronized"));
+  EXPECT_GE(input_count(n.diagnostics_text, "camera_info", "unmatched"), 0) << n.diagnostics_text;
+}
+
 TEST(BadInput, StillRefinesAGoodFrameAfterwards) {
   Node& n = *node;
   const diffdope::Pose init =

@@ -4,11 +4,14 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <filesystem>
+#include <fstream>
 #include <functional>
 #include <limits>
 #include <string>
 #include <vector>
 
+#include "diffdope/input_files.hpp"
 #include "diffdope/object_track.hpp"
 #include "diffdope/procedural.hpp"
 #include "diffdope/refiner.hpp"
@@ -183,4 +186,20 @@ TEST(InputLimits, TrackingOptionsOutsideTheirRangeAreRefused) {
     set(o);
     EXPECT_NE(invalid_argument_message([&] { ObjectTrack t(o); }).find(name), std::string::npos) << name;
   }
+}
+
+// Found by fuzz_camera_pose: a YAML camera file holding bytes that are not UTF-8 made the error message itself
+// throw (nlohmann::json::dump), which terminated diffdope_refine.
+TEST(InputLimits, CameraFilesWithBytesThatAreNotUtf8GetAnErrorNotACrash) {
+  const std::string path = (std::filesystem::temp_directory_path() / "diffdope_camera_not_utf8.yaml").string();
+  std::ofstream(path) << "fx: \"\xff\xfe\x01\"\nfy: 500\ncx: 320\ncy: 240\n";
+  try {
+    read_camera_file(path, 640, 480);
+    FAIL() << "accepted";
+  } catch (const InputFileError& e) {
+    EXPECT_NE(std::string(e.what()).find("'fx' must be a number or an array of numbers, found"), std::string::npos) << e.what();
+  }
+  std::ofstream(path) << "K: [600, 0, 320, 0, 600, 240, 0, 0, \"\xc3\x28\"]\n";
+  EXPECT_THROW(read_camera_file(path, 640, 480), InputFileError);
+  std::filesystem::remove(path);
 }
