@@ -5,6 +5,7 @@
 // assimp's output (assimp already converts glTF's top-left origin, so no aiProcess_FlipUVs). Textures are stored
 // with row 0 = top image row.
 #include <algorithm>
+#include <assimp/BaseImporter.h>
 #include <assimp/Importer.hpp>
 #include <assimp/material.h>
 #include <assimp/postprocess.h>
@@ -17,6 +18,7 @@
 #include <filesystem>
 #include <fstream>
 #include <map>
+#include <memory>
 #include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
@@ -448,6 +450,20 @@ std::string diffuse_texture_ref(const aiMaterial* mat) {
 ImportedModel import_with_assimp(const std::string& path, const MeshLoadOptions& options, const PlyHeader& ply,
                                  bool is_ply) {
   Assimp::Importer importer;
+  // Only the readers of the format the extension names: else assimp sniffs the content of a file its own reader
+  // refuses and hands it to any other (a corrupt .gltf read as 3DS allocated terabytes), which puts every one of
+  // its ~40 readers in front of hostile input instead of the few our checks cover.
+  const std::string ext = lower(fs::path(path).extension().string());
+  std::vector<std::unique_ptr<Assimp::BaseImporter>> unregistered;  // (UnregisterLoader hands them back to us)
+  for (size_t i = importer.GetImporterCount(); i-- > 0;) {
+    const aiImporterDesc* info = importer.GetImporterInfo(i);
+    std::istringstream exts(info && info->mFileExtensions ? info->mFileExtensions : "");
+    bool reads = false;
+    for (std::string e; exts >> e;) reads = reads || "." + lower(e) == ext;
+    Assimp::BaseImporter* reader = importer.GetImporter(i);
+    if (!reads && reader && importer.UnregisterLoader(reader) == AI_SUCCESS) unregistered.emplace_back(reader);
+  }
+  if (importer.GetImporterCount() == 0) fail(path, "no reader for '" + ext + "' files");
   // ValidateDataStructure: assimp checks its own output (indices, counts) before the other steps use it.
   const unsigned flags = aiProcess_ValidateDataStructure | aiProcess_Triangulate | aiProcess_PreTransformVertices |
                          aiProcess_JoinIdenticalVertices | aiProcess_SortByPType;

@@ -214,6 +214,24 @@ TEST_F(HostileFiles, AHugeTextureIsRefusedFromItsHeaderAndABigOneIsDownsampled) 
   EXPECT_NEAR(mesh.textures[0].rgb[1], 200 / 255.f, 1e-3);  // (RGB order: green)
 }
 
+TEST_F(HostileFiles, AFileIsReadOnlyAsTheFormatItsExtensionNames) {
+  // A valid PLY named .gltf: assimp alone would sniff it and read it as PLY (and garbage as anything, 3DS
+  // included, which the fuzzer found allocating terabytes).
+  const std::string ply = std::string(kAsciiHeader) + "0 0 0\n1 0 0\n0 1 0\n1 1 0\n3 0 1 2\n3 1 3 2\n";
+  EXPECT_EQ(load_error(write("ok.ply", ply)), "");
+  EXPECT_NE(load_error(write("not.gltf", ply)), "");
+  EXPECT_NE(load_error(write("not.stl", "glTF")), "");
+  // fuzz_mesh_gltf's find (40 bytes another reader took for its own format, then asked for 4.6 TB).
+  const unsigned char found[40] = {0x71, 0x75, 0x69, 0x63, 0x6b, 0x33, 0x64, 0x73, 0x30, 0xff, 0xff, 0xff, 0xff, 0xff,
+                                   0xff, 0xff, 0xff, 0xff, 0xff, 0xff, 0xff, 0xff, 0xff, 0xff, 0xff, 0xff, 0xff, 0xff,
+                                   0xff, 0xff, 0xff, 0xff, 0xff, 0x20, 0x30, 0x2e, 0x77, 0x20, 0x5d, 0x61};
+  MeshLoadOptions in_process;
+  in_process.isolate_import = false;
+  EXPECT_NE(load_error(write("found.gltf", std::string(reinterpret_cast<const char*>(found), 40)), in_process), "");
+  const std::string m = load_error(write("x.unknownformat", ply));
+  EXPECT_NE(m.find("no reader for '.unknownformat' files"), std::string::npos) << m;
+}
+
 TEST_F(HostileFiles, TooManyVerticesAreRefusedFromTheHeader) {
   MeshLoadOptions o;
   o.max_vertices = 4;
