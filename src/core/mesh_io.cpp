@@ -212,7 +212,10 @@ void check_ascii_ply_body(std::istream& in, PlyHeader& h) {
             return;
           }
           if (is_vertex_index_list(e, p) && (!(v >= 0 && v < double(h.num_vertices)) || v != std::floor(v))) {
-            h.body_error = "corrupt " + where() + ": refers to vertex " + std::to_string((long long)v) +
+            // (casting a huge value to an integer would be undefined: fuzz_mesh_ply's find)
+            const std::string shown =
+                std::fabs(v) < 1e15 && v == std::floor(v) ? std::to_string((long long)v) : std::to_string(v);
+            h.body_error = "corrupt " + where() + ": refers to vertex " + shown +
                            "; the file has " + std::to_string(h.num_vertices) + " vertices";
             return;
           }
