@@ -16,6 +16,9 @@ struct InputFileError : std::runtime_error {
   InputFileError(std::string f, const std::string& what) : std::runtime_error(what), file(std::move(f)) {}
 };
 
+/// Throws InputFileError unless `path` is a regular file that can be opened for reading.
+void check_input_file(const std::string& path);
+
 /// Intrinsics from .json or .yaml/.yml: fx, fy, cx, cy[, width, height] (ROS: image_width, image_height), or a
 /// 3x3 matrix as BOP's cam_K (9 values, row-major), K / k or camera_matrix ({data: [...]} as ROS's yaml); a BOP
 /// scene_camera.json with a single image. The size is the image's; a size in the file must match it.

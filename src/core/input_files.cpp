@@ -23,11 +23,8 @@ constexpr int kMaxNesting = 64;  // (a pathological file must not exhaust the st
 [[noreturn]] void fail(const std::string& file, const std::string& what) { throw InputFileError(file, what); }
 
 void check_file(const std::string& path) {
+  check_input_file(path);
   std::error_code ec;
-  if (!fs::exists(path, ec)) fail(path, "file does not exist");
-  if (fs::is_directory(path, ec)) fail(path, "is a directory, expected a file");
-  std::ifstream probe(path, std::ios::binary);
-  if (!probe) fail(path, "cannot open the file for reading");
   if (fs::file_size(path, ec) > (size_t(64) << 20)) fail(path, "more than 64 MB: not a camera or pose file");
 }
 
@@ -131,6 +128,14 @@ double number(const json& j, const std::string& key, const std::string& file) {
 }
 
 }  // namespace
+
+void check_input_file(const std::string& path) {
+  std::error_code ec;
+  if (!fs::exists(path, ec)) fail(path, "file does not exist");
+  if (fs::is_directory(path, ec)) fail(path, "is a directory, expected a file");
+  std::ifstream probe(path, std::ios::binary);
+  if (!probe) fail(path, "cannot open the file for reading");
+}
 
 Camera read_camera_file(const std::string& path, int image_width, int image_height) {
   const std::string ext = lower(fs::path(path).extension().string());

@@ -109,13 +109,7 @@ class QuietStderr {
   int saved_ = -1;
 };
 
-void check_file(const std::string& path) {
-  std::error_code ec;
-  if (!fs::exists(path, ec)) fail(path, "file does not exist");
-  if (fs::is_directory(path, ec)) fail(path, "is a directory, expected a file");
-  std::ifstream probe(path, std::ios::binary);
-  if (!probe) fail(path, "cannot open the file for reading");
-}
+void check_file(const std::string& path) { check_input_file(path); }
 
 cv::Mat read_image(const std::string& path, int flags, const std::string& kind) {
   check_file(path);
