@@ -12,6 +12,7 @@
 #include <chrono>
 #include <cstdio>
 #include <cstring>
+#include <mutex>
 #include <new>
 #include <stdexcept>
 
@@ -71,18 +72,25 @@ std::string run_isolated(const std::function<std::string()>& work, const Isolati
                          const std::string& what) {
   auto fail = [&](const std::string& m) -> std::runtime_error { return std::runtime_error(what + ": " + m); };
   int fds[2];
-  if (::pipe2(fds, O_CLOEXEC) != 0) throw fail(std::string("cannot create a pipe: ") + std::strerror(errno));
-  std::fflush(nullptr);  // else the child holds a copy of unwritten output
-  const pid_t pid = ::fork();
-  if (pid < 0) {
-    ::close(fds[0]), ::close(fds[1]);
-    throw fail(std::string("cannot start a child process: ") + std::strerror(errno));
+  pid_t pid;
+  {
+    // Two calls on two threads: the second child must not inherit the first one's write end (the first parent
+    // would then wait for both children to end before it sees its answer complete).
+    static std::mutex forking;
+    const std::lock_guard<std::mutex> lock(forking);
+    if (::pipe2(fds, O_CLOEXEC) != 0) throw fail(std::string("cannot create a pipe: ") + std::strerror(errno));
+    std::fflush(nullptr);  // else the child holds a copy of unwritten output
+    pid = ::fork();
+    if (pid < 0) {
+      ::close(fds[0]), ::close(fds[1]);
+      throw fail(std::string("cannot start a child process: ") + std::strerror(errno));
+    }
+    if (pid == 0) {
+      ::close(fds[0]);
+      child_main(fds[1], work, limits);
+    }
+    ::close(fds[1]);
   }
-  if (pid == 0) {
-    ::close(fds[0]);
-    child_main(fds[1], work, limits);
-  }
-  ::close(fds[1]);
   std::string data;
   bool timed_out = false;
   const auto deadline = std::chrono::steady_clock::now() + std::chrono::duration<double>(limits.timeout_s);
