@@ -24,6 +24,10 @@
 #endif
 #endif
 
+#ifdef DIFFDOPE_SANITIZED
+#include <sanitizer/common_interface_defs.h>
+#endif
+
 namespace diffdope {
 namespace {
 
@@ -41,6 +45,12 @@ bool write_all(int fd, const char* p, size_t n) {
 /// destructors or atexit handlers (they belong to the parent).
 [[noreturn]] void child_main(int fd, const std::function<std::string()>& work, const IsolationLimits& limits) {
   ::prctl(PR_SET_PDEATHSIG, SIGKILL);  // do not outlive a parent that was killed
+  // A crash here must end the child by its signal, which the parent names: not run the parent's crash handlers
+  // (a backtrace printer, a fuzzer's, a sanitizer's), which belong to the parent and may report or exit otherwise.
+  for (int sig : {SIGSEGV, SIGBUS, SIGFPE, SIGILL, SIGABRT}) ::signal(sig, SIG_DFL);
+#ifdef DIFFDOPE_SANITIZED
+  __sanitizer_set_death_callback(nullptr);  // (libFuzzer's would write the parent's input as a crash)
+#endif
 #ifndef DIFFDOPE_SANITIZED             // (sanitizers reserve terabytes of address space)
   if (limits.address_space_bytes > 0) {
     const rlimit r{rlim_t(limits.address_space_bytes), rlim_t(limits.address_space_bytes)};

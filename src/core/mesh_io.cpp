@@ -131,6 +131,7 @@ void check_binary_ply_body(std::istream& in, PlyHeader& h) {
   };
   unsigned char scratch[8];
   for (const PlyElement& e : h.elements) {
+    if (e.properties.empty()) continue;  // nothing to read, however many it claims (fuzz_mesh_ply's find: a hang)
     for (long long r = 0; r < e.count; ++r) {
       for (const PlyProperty& p : e.properties) {
         if (!p.is_list) {
@@ -258,11 +259,17 @@ PlyHeader read_ply_header(const std::string& path) {
     } else if (kw == "element") {
       PlyElement e;
       ss >> e.name >> e.count;
-      if (!ss || e.count < 0) h.body_error = "corrupt PLY header: '" + line + "'";
+      // (a count beyond any file's size would also overflow the sums below: fuzz_mesh_ply's find)
+      if (!ss || e.count < 0 || e.count > (1LL << 40)) {
+        h.body_error = "corrupt PLY header: '" + line.substr(0, 60) + "'";
+        e.count = 0;
+      }
       if (e.name == "material") h.has_material_element = true;
       if (e.name == "face" || e.name == "tristrips") h.num_faces = std::max(h.num_faces, 0LL) + e.count;
       if (e.name == "vertex") h.num_vertices = e.count;
       h.elements.push_back(e);
+    } else if (kw != "format" && kw != "property" && !kw.empty()) {
+      h.body_error = "corrupt PLY header: unknown line '" + line.substr(0, 60) + "'";
     } else if (kw == "property") {
       PlyProperty p;
       std::string type;

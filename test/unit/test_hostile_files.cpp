@@ -145,6 +145,25 @@ TEST_F(HostileFiles, ATruncatedBinaryBodyOrAHugeListCountIsRefused) {
   EXPECT_NE(load_error(write("list255.ply", big)).find("truncated PLY"), std::string::npos);
 }
 
+// fuzz_mesh_ply's find: a corrupt property line left an element of 2e18 records with nothing to read, which the
+// body check walked for ever.
+TEST_F(HostileFiles, AHeaderWithUnknownLinesOrEmptyHugeElementsEndsAtOnce) {
+  std::string s = binary_ply(8, {{0, 1, 2}});
+  s.replace(s.find("property list"), 8, "propert ");
+  EXPECT_NE(load_error(write("bad_line.ply", s)).find("corrupt PLY header: unknown line 'propert"), std::string::npos);
+  std::string empty = binary_ply(8, {{0, 1, 2}});
+  empty.insert(empty.find("end_header"), "element junk 2222222222222222221\n");
+  // Counts no file could hold (their sum overflowed a 64-bit integer).
+  std::string huge = binary_ply(8, {{0, 1, 2}});
+  huge.insert(huge.find("end_header"), "element face 9223372036854775807\nproperty uchar a\n");
+  huge.insert(huge.find("end_header"), "element face 9223372036854775807\nproperty uchar b\n");
+  EXPECT_NE(load_error(write("huge.ply", huge)).find("corrupt PLY header: 'element face 9223372036854775807"),
+            std::string::npos);
+  const auto t0 = std::chrono::steady_clock::now();
+  load_error(write("empty.ply", empty));
+  EXPECT_LT(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(), 10.0);
+}
+
 TEST_F(HostileFiles, AsciiPlyGarbageAndBadIndicesAreRefused) {
   const std::string good = std::string(kAsciiHeader) + "0 0 0\n1 0 0\n0 1 0\n1 1 0\n3 0 1 2\n3 1 3 2\n";
   EXPECT_EQ(load_error(write("good.ply", good)), "");
