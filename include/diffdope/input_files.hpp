@@ -16,6 +16,10 @@ struct InputFileError : std::runtime_error {
   InputFileError(std::string f, const std::string& what) : std::runtime_error(what), file(std::move(f)) {}
 };
 
+/// A command-line value that must be a whole integer in [lo, hi]; std::invalid_argument naming `flag` otherwise
+/// ("--frames: expected an integer, got '3x'", "--frames: 0 is outside [1, 100000]").
+long long parse_integer_arg(const std::string& flag, const std::string& text, long long lo, long long hi);
+
 /// Throws InputFileError unless `path` is a regular file that can be opened for reading.
 void check_input_file(const std::string& path);
 

@@ -129,6 +129,21 @@ double number(const json& j, const std::string& key, const std::string& file) {
 
 }  // namespace
 
+long long parse_integer_arg(const std::string& flag, const std::string& text, long long lo, long long hi) {
+  size_t used = 0;
+  long long x = 0;
+  try {
+    x = std::stoll(text, &used);
+  } catch (const std::exception&) {
+    used = 0;
+  }
+  if (used == 0 || used != text.size())
+    throw std::invalid_argument(flag + ": expected an integer, got '" + text + "'");
+  if (x < lo || x > hi)
+    throw std::invalid_argument(flag + ": " + text + " is outside [" + std::to_string(lo) + ", " + std::to_string(hi) + "]");
+  return x;
+}
+
 void check_input_file(const std::string& path) {
   std::error_code ec;
   if (!fs::exists(path, ec)) fail(path, "file does not exist");

@@ -47,6 +47,7 @@
 #include <vector>
 
 #include "diffdope_ros/conversions.hpp"
+#include "diffdope/input_files.hpp"
 #include "diffdope/object_config.hpp"
 #include "diffdope/procedural.hpp"
 #include "diffdope/synthetic.hpp"
@@ -89,17 +90,11 @@ struct UsageError : std::runtime_error {
 };
 
 long long parse_int(const std::string& opt, const std::string& v, long long lo, long long hi) {
-  size_t used = 0;
-  long long x = 0;
   try {
-    x = std::stoll(v, &used);
-  } catch (const std::exception&) {
-    used = 0;
+    return diffdope::parse_integer_arg(opt, v, lo, hi);
+  } catch (const std::invalid_argument& e) {
+    throw UsageError(e.what());
   }
-  if (used == 0 || used != v.size()) throw UsageError(opt + ": expected an integer, got '" + v + "'");
-  if (x < lo || x > hi)
-    throw UsageError(opt + ": " + v + " is out of range [" + std::to_string(lo) + ", " + std::to_string(hi) + "]");
-  return x;
 }
 
 double parse_double(const std::string& opt, const std::string& v, double lo, double hi, bool lo_inclusive) {

@@ -20,6 +20,7 @@
 #include <sstream>
 
 #include "diffdope/bop.hpp"
+#include "diffdope/input_files.hpp"
 #include "diffdope/metrics.hpp"
 #include "diffdope/refiner.hpp"
 #include "diffdope/synthetic.hpp"
@@ -89,21 +90,6 @@ void write_perturbations(BopDataset& data, const std::string& dir, int samples, 
   }
 }
 
-/// A whole-string integer in [lo, hi] for a command-line flag, or an error naming the flag.
-long long parse_integer(const std::string& flag, const std::string& v, long long lo, long long hi) {
-  size_t used = 0;
-  long long x = 0;
-  try {
-    x = std::stoll(v, &used);
-  } catch (const std::exception&) {
-    used = 0;
-  }
-  if (used != v.size() || v.empty()) throw std::invalid_argument(flag + ": expected an integer, got '" + v + "'");
-  if (x < lo || x > hi)
-    throw std::invalid_argument(flag + ": " + v + " is outside [" + std::to_string(lo) + ", " + std::to_string(hi) + "]");
-  return x;
-}
-
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -126,11 +112,11 @@ int main(int argc, char** argv) {
     else if (a == "--out") out_path = v;
     else if (a == "--config") config = v;
     else if (a == "--summary-json") summary_path = v;
-    else if (a == "--threads") threads = int(parse_integer(a, v, 0, RenderOptions::kMaxThreads));
+    else if (a == "--threads") threads = int(parse_integer_arg(a, v, 0, RenderOptions::kMaxThreads));
     else if (a == "--device") device = v;
-    else if (a == "--max-samples") max_samples = int(parse_integer(a, v, 0, 1000000));
-    else if (a == "--generate") generate = int(parse_integer(a, v, 0, 100000));
-    else if (a == "--seed") seed = uint64_t(parse_integer(a, v, 0, std::numeric_limits<long long>::max()));
+    else if (a == "--max-samples") max_samples = int(parse_integer_arg(a, v, 0, 1000000));
+    else if (a == "--generate") generate = int(parse_integer_arg(a, v, 0, 100000));
+    else if (a == "--seed") seed = uint64_t(parse_integer_arg(a, v, 0, std::numeric_limits<long long>::max()));
     else if (a == "--symmetric") symmetric_arg = v;
     else if (a == "--levels") {
       std::stringstream ss(v);
@@ -160,7 +146,7 @@ int main(int argc, char** argv) {
     std::set<int> symmetric_ids;  // --symmetric: instead of models_info.json
     if (!symmetric_arg.empty() && symmetric_arg != "none") {
       std::stringstream ss(symmetric_arg);
-      for (std::string id; std::getline(ss, id, ',');) symmetric_ids.insert(int(parse_integer("--symmetric", id, 0, INT_MAX)));
+      for (std::string id; std::getline(ss, id, ',');) symmetric_ids.insert(int(parse_integer_arg("--symmetric", id, 0, INT_MAX)));
     }
     BopDataset data(root, split, symmetric_arg.empty() ? nullptr : &symmetric_ids);
     if (!fs::is_directory(pert_dir) && generate == 0) throw std::runtime_error(pert_dir + ": not a directory");
