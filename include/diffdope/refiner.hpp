@@ -151,6 +151,11 @@ class Refiner {
   std::unique_ptr<Renderer> renderer_;
 };
 
+/// Hypothesis evaluations (one render + loss + gradient of one pose) that refining one object with `o` costs at
+/// most: the runs of every iteration, less those successive halving drops, and the final scoring. An early stop
+/// only lowers it. The unit of RefineTimeEstimator (refine_time.hpp).
+long planned_evaluations(const RefinerOptions& o);
+
 /// One plain gradient step of the refiner's parametrisation: translation of the object's centre `pivot`
 /// (camera frame) and rotation about it, with the scaling described at RefinerOptions::lr_low.
 Pose refiner_step(const Pose& pose, const Vector6d& gradient, double lr, double diameter,

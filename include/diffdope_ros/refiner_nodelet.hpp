@@ -35,6 +35,7 @@
 #include "diffdope/mesh.hpp"
 #include "diffdope/object_config.hpp"
 #include "diffdope/object_track.hpp"
+#include "diffdope/refine_time.hpp"
 #include "diffdope/refiner.hpp"
 #include "diffdope_ros/InitialPoseArray.h"
 #include "diffdope_ros/Refine.h"
@@ -139,6 +140,9 @@ class RefinerNodelet : public nodelet::Nodelet {
   int queue_size_ = 10;
   std::string parameter_error_;  // a parameter outside its range (loadParameters): no object is refined
   double max_interval_ = 0.1, sync_timeout_ = 3.0, tf_timeout_ = 0.1;
+  /// ~max_request_time: a ~refine call estimated to take longer is refused (it would stop streaming that long).
+  double max_request_time_ = 10.0;
+  diffdope::RefineTimeEstimator refine_time_;  // the worker's: learns from every refinement it times
   std::string frame_prefix_, fixed_frame_, detection_prefix_;
   diffdope::TrackOptions track_options_;
   diffdope::RefinerOptions refiner_options_;
@@ -193,7 +197,11 @@ class RefinerNodelet : public nodelet::Nodelet {
   // Statistics (work_mutex_).
   struct Stats {
     long frames_synced = 0, frames_skipped = 0, frames_refined = 0, objects_refined = 0, implausible = 0;
+    long requests_succeeded = 0, requests_failed = 0;  // ~refine calls answered (Refine::Response::success)
     double last_latency = -1, latency_sum = 0, last_refine_ms = 0;
+    double ms_per_evaluation = 0;       // refine_time_'s current cost (copied for diagnostics)
+    bool cost_measured = false;         // ... measured here, not the prior
+    ros::WallTime serving_since;        // a ~refine call is being served (streaming paused) since; zero if not
     ros::WallTime first_refined, last_refined;
   } stats_;
   ros::WallTime last_arrival_[4];  // rgb, info, depth, mask (wall time of the last message of each)

@@ -58,6 +58,14 @@ int coarse_iterations(const RefinerOptions& o) {
   return std::min(int(std::floor(o.coarse_fraction * o.iterations)), o.iterations - 1);
 }
 
+/// Halvings due by iteration k of `iters`: at 25 %, 50 % and 75 % (">=": a stalled coarse phase may jump over
+/// them).
+int halvings_due(int k, int iters) {
+  int due = 0;
+  for (int quarter = 1; quarter <= 3; ++quarter) due += quarter * iters / 4 > 0 && k >= quarter * iters / 4;
+  return due;
+}
+
 /// The frame's rgb / depth at `scale`, with the paper's edge map when the loss uses it.
 Observation scale_frame(const Camera& camera, const Observation& frame, const RefinerOptions& o, double scale) {
   Observation f;
@@ -208,9 +216,7 @@ RefineRun::RefineRun(const RefinerOptions& o, const Camera& camera, const Observ
 const std::vector<Pose>& RefineRun::batch() {
   const int iters = options_.iterations;
   const bool last = k_ == iters;
-  // Halvings are due at 25 %, 50 % and 75 % of the iterations (">=": a stalled coarse phase may jump over them).
-  int due = 0;
-  for (int quarter = 1; quarter <= 3; ++quarter) due += quarter * iters / 4 > 0 && k_ >= quarter * iters / 4;
+  const int due = halvings_due(k_, iters);
   for (; options_.successive_halving && !last && halvings_ < due; ++halvings_) {
     if (active_.size() <= 1) continue;
     std::stable_sort(active_.begin(), active_.end(), [&](int a, int b) { return best_[a].total < best_[b].total; });
@@ -415,6 +421,22 @@ std::vector<RefineResult> Refiner::refine_all(const Camera& camera, const Observ
     }
   }
   return out;
+}
+
+}  // namespace diffdope
+
+namespace diffdope {
+
+long planned_evaluations(const RefinerOptions& o) {
+  long total = 0;
+  int active = std::max(o.batch_size, 1), halvings = 0;
+  for (int k = 0; k <= o.iterations; ++k) {  // as RefineRun::batch(): k == iterations only evaluates
+    for (const int due = halvings_due(k, o.iterations); o.successive_halving && k < o.iterations && halvings < due;
+         ++halvings)
+      active = (active + 1) / 2;
+    total += active;
+  }
+  return total + 2;  // finish(): the initial loss at the fine scale and the scoring render
 }
 
 }  // namespace diffdope

@@ -75,6 +75,7 @@ void RefinerNodelet::loadParameters() {
   max_interval_ = pnh.param("max_interval", 0.1);
   sync_timeout_ = pnh.param("sync_timeout", 3.0);
   tf_timeout_ = pnh.param("tf_timeout", 0.1);
+  max_request_time_ = pnh.param("max_request_time", 10.0);
   frame_prefix_ = pnh.param<std::string>("frame_prefix", "diffdope_");
   fixed_frame_ = pnh.param<std::string>("fixed_frame", "");
   detection_prefix_ = pnh.param<std::string>("detection_topic_prefix", "/dope/pose_");
@@ -95,12 +96,13 @@ void RefinerNodelet::loadParameters() {
     check.above("~max_interval", max_interval_, 0, 10, " seconds");
     check("~sync_timeout", sync_timeout_, 0, 3600, " seconds");
     check("~tf_timeout", tf_timeout_, 0, 60, " seconds");
+    check.above("~max_request_time", max_request_time_, 0, 3600, " seconds");
     check("~error_throttle", error_throttle, 0, 3600, " seconds");
     track_options_.validate();
     errors_.set_throttle_period(error_throttle);
   } catch (const std::invalid_argument& e) {
     parameter_error_ = e.what();
-    queue_size_ = 10, max_interval_ = 0.1, sync_timeout_ = 3.0, tf_timeout_ = 0.1;
+    queue_size_ = 10, max_interval_ = 0.1, sync_timeout_ = 3.0, tf_timeout_ = 0.1, max_request_time_ = 10.0;
   }
 }
 
@@ -417,9 +419,18 @@ void RefinerNodelet::onDiagnostics(diagnostic_updater::DiagnosticStatusWrapper& 
   const double span = (s.last_refined - s.first_refined).toSec();
   const double rate = s.frames_refined > 1 && span > 0 ? (s.frames_refined - 1) / span : 0.0;
   const bool recent_error = e.last_error_time > 0 && ros::WallTime::now().toSec() - e.last_error_time < 10.0;
+  // The worker serves ~refine calls before frames: while it does, streaming is paused (and says so).
+  const bool on_request = mode_ == Mode::kOnRequest, serving = !s.serving_since.isZero();
+  const std::string serving_for =
+      serving ? format_fixed((ros::WallTime::now() - s.serving_since).toSec(), 1) + " s" : "";
+  const std::string streaming = on_request ? (serving ? "off (mode on_request); serving a ~refine call for " + serving_for
+                                                      : "off (mode on_request)")
+                                           : (serving ? "paused for " + serving_for + ": serving a ~refine call"
+                                                      : "running");
   if (enabled == 0) stat.summary(diagnostic_msgs::DiagnosticStatus::ERROR, "no object can be refined: " + e.last_error);
   else if (recent_error) stat.summary(diagnostic_msgs::DiagnosticStatus::WARN, e.last_error);
-  else stat.summary(diagnostic_msgs::DiagnosticStatus::OK, "refining");
+  else stat.summary(diagnostic_msgs::DiagnosticStatus::OK, serving && !on_request ? "streaming " + streaming : "refining");
+  stat.add("streaming", streaming);
   stat.add("objects enabled", std::to_string(enabled) + " of " + std::to_string(slots_.size()));
   stat.add("backend", refiner_ ? refiner_->backend() : std::string("none (configuration error)"));
   for (const auto& slot : slots_)
@@ -448,6 +459,11 @@ void RefinerNodelet::onDiagnostics(diagnostic_updater::DiagnosticStatusWrapper& 
   stat.add("last latency (s)", format_fixed(s.last_latency));
   stat.add("mean latency (s)", format_fixed(s.frames_refined ? s.latency_sum / s.frames_refined : -1.0));
   stat.add("last refine time (ms)", format_fixed(s.last_refine_ms, 1));
+  stat.add("~refine calls succeeded", s.requests_succeeded);
+  stat.add("~refine calls failed or refused", s.requests_failed);
+  stat.add("estimated cost (ms per object and evaluation)",
+           s.cost_measured ? format_fixed(s.ms_per_evaluation, 3) + " (measured)"
+                           : format_fixed(1e3 * refine_time_.kPriorSecondsPerEvaluation, 3) + " (prior, nothing timed yet)");
   stat.add("last error", e.last_error);
   for (const auto& kv : e.error_counts) stat.add("errors: " + kv.first, kv.second);
   for (const auto& kv : e.warn_counts) stat.add("warnings: " + kv.first, kv.second);

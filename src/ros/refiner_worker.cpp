@@ -3,6 +3,8 @@
 // refiner_visualization.cpp.
 #include <tf2/exceptions.h>
 
+#include <algorithm>
+
 #include "diffdope_ros/conversions.hpp"
 #include "diffdope_ros/refiner_nodelet.hpp"
 
@@ -43,10 +45,16 @@ void RefinerNodelet::workerLoop() {
         continue;
       }
     }
+    if (job) {  // streaming is paused until the call is answered (diagnostics say so)
+      std::lock_guard<std::mutex> lock(work_mutex_);
+      stats_.serving_since = ros::WallTime::now();
+    }
     try {
       if (job) {
-        job->response.set_value(processRequest(job->request, frame));
+        const diffdope_ros::Refine::Response res = processRequest(job->request, frame);
+        job->response.set_value(res);
         std::lock_guard<std::mutex> lock(work_mutex_);
+        ++(res.success ? stats_.requests_succeeded : stats_.requests_failed);
         if (latest_frame_ == frame) frame_pending_ = false;  // that frame is done: do not stream it again
       } else {
         processStreaming(frame);
@@ -57,6 +65,10 @@ void RefinerNodelet::workerLoop() {
     } catch (...) {  // not a std::exception: still never take the node down
       errors_.error("internal", "refinement failed with an unknown exception");
       answer_failure("refinement failed with an unknown exception");
+    }
+    if (job) {
+      std::lock_guard<std::mutex> lock(work_mutex_);
+      stats_.serving_since = ros::WallTime();
     }
   }
 }
@@ -200,6 +212,14 @@ diffdope_ros::Refine::Response RefinerNodelet::processRequest(const diffdope_ros
   if (req.iterations < 0 || req.batch_size < 0) return fail("iterations and batch_size must be >= 0 (0 = configured)");
   if (req.iterations > 1000 || req.batch_size > 256)
     return fail("iterations <= 1000 and batch_size <= 256 per call (the worker would be blocked for too long)");
+  diffdope::RefinerOptions options = refiner_options_;
+  if (req.iterations > 0) options.iterations = req.iterations;
+  if (req.batch_size > 0) options.batch_size = req.batch_size;
+  try {
+    options.validate();
+  } catch (const std::exception& e) {
+    return fail(e.what());
+  }
   if (!frame) return fail("no synchronized frame received yet (check the input topics)");
 
   resetOnTimeJump(*frame);
@@ -226,6 +246,15 @@ diffdope_ros::Refine::Response RefinerNodelet::processRequest(const diffdope_ros
   }
   if (!missing.empty())
     return fail("no initial pose for " + join(missing) + " (no recent detection or track); pass initial_poses");
+  // The time budget, before any detection is used up: every object the request will refine has a start by now.
+  std::vector<bool> refined = chosen;
+  for (const auto& n : req.object_names) refined[size_t(find(n))] = true;
+  if (req.object_names.empty() && req.initial_poses.empty())
+    for (size_t i = 0; i < slots_.size(); ++i) refined[i] = slots_[i]->mesh && slots_[i]->track.peek(stamp);
+  const int objects = int(std::count(refined.begin(), refined.end(), true));
+  if (const std::string why = diffdope::check_request_time(options, objects, refine_time_, max_request_time_);
+      !why.empty())
+    return fail(why);
   if (req.object_names.empty() && req.initial_poses.empty()) {
     for (size_t i = 0; i < slots_.size(); ++i)
       if (slots_[i]->mesh)
@@ -243,14 +272,6 @@ diffdope_ros::Refine::Response RefinerNodelet::processRequest(const diffdope_ros
         chosen[i] = true;
       }
     }
-  }
-  diffdope::RefinerOptions options = refiner_options_;
-  if (req.iterations > 0) options.iterations = req.iterations;
-  if (req.batch_size > 0) options.batch_size = req.batch_size;
-  try {
-    options.validate();
-  } catch (const std::exception& e) {
-    return fail(e.what());
   }
   std::vector<std::string> skipped;
   res.results = refineAndPublish(*frame, seeds, options, &skipped);
@@ -301,7 +322,10 @@ std::vector<diffdope_ros::RefinedPose> RefinerNodelet::refineAndPublish(
   if (options.iterations != refiner_options_.iterations || options.batch_size != refiner_options_.batch_size)
     custom = std::make_unique<diffdope::Refiner>(options);
   diffdope::Refiner& refiner = custom ? *custom : *refiner_;
+  const ros::WallTime refine_start = ros::WallTime::now();
   std::vector<diffdope::RefineResult> results = refiner.refine_all(frame.camera, frame.observation, targets);
+  refine_time_.observe(double(diffdope::planned_evaluations(options)) * double(targets.size()),
+                       (ros::WallTime::now() - refine_start).toSec());
 
   diffdope_ros::RefinedPoseArray array;
   array.header = frame.header;
@@ -363,6 +387,8 @@ std::vector<diffdope_ros::RefinedPose> RefinerNodelet::refineAndPublish(
     stats_.last_latency = latency;
     stats_.latency_sum += latency;
     stats_.last_refine_ms = (now - start).toSec() * 1e3;
+    stats_.ms_per_evaluation = 1e3 * refine_time_.seconds_per_evaluation();
+    stats_.cost_measured = refine_time_.observations() > 0;
   }
   try {  // visualisation must never cost the refinement its result
     if (overlay_pub_.getNumSubscribers() > 0) publishOverlay(frame, slot_of, results);

@@ -1,5 +1,7 @@
-// rostest (refine_service.test): ~refine during streaming, with explicit initial poses, with overrides, and
-// with bad requests (unknown names, unknown frames, NaN poses) that must fail with a message.
+// rostest (refine_service.test): ~refine during streaming, with explicit initial poses, with overrides, with
+// bad requests (unknown names, unknown frames, NaN poses) that must fail with a message, and with requests over
+// the time budget (~max_request_time), while diagnostics say when streaming is paused.
+#include <diagnostic_msgs/DiagnosticArray.h>
 #include <gtest/gtest.h>
 #include <ros/ros.h>
 
@@ -36,6 +38,21 @@ struct World {
   void onRefined(const diffdope_ros::RefinedPoseArrayConstPtr&) {
     std::lock_guard<std::mutex> l(mutex);
     ++streamed;
+  }
+  std::vector<std::pair<ros::WallTime, std::string>> streaming;  // the refiner's diagnostics value "streaming"
+  void onDiagnostics(const diagnostic_msgs::DiagnosticArrayConstPtr& m) {
+    std::lock_guard<std::mutex> l(mutex);
+    for (const auto& status : m->status)
+      for (const auto& kv : status.values)
+        if (kv.key == "streaming") streaming.emplace_back(ros::WallTime::now(), kv.value);
+  }
+  /// The "streaming" values received in [from, to].
+  std::vector<std::string> streamingBetween(ros::WallTime from, ros::WallTime to) {
+    std::lock_guard<std::mutex> l(mutex);
+    std::vector<std::string> out;
+    for (const auto& [t, v] : streaming)
+      if (t >= from && t <= to) out.push_back(v);
+    return out;
   }
   int streamedCount() {
     std::lock_guard<std::mutex> l(mutex);
@@ -198,6 +215,47 @@ TEST(RefineService, BadRequestsFailWithAMessage) {
   EXPECT_TRUE(srv.response.success) << srv.response.message;
 }
 
+TEST(RefineService, RequestsOverTheTimeBudgetAreRefusedAndDiagnosticsSayWhenStreamingIsPaused) {
+  // 256 runs x 1000 iterations on every object: minutes on a CPU, far over ~max_request_time (30 s in the
+  // launch file). Refused from the estimate, without refining (the call returns at once) and without using up
+  // a detection.
+  {
+    diffdope_ros::Refine srv;
+    srv.request.iterations = 1000;
+    srv.request.batch_size = 256;
+    const ros::WallTime t0 = ros::WallTime::now();
+    ASSERT_TRUE(call(srv));
+    const double took = (ros::WallTime::now() - t0).toSec();
+    EXPECT_FALSE(srv.response.success);
+    EXPECT_TRUE(srv.response.results.empty());
+    EXPECT_NE(srv.response.message.find("~max_request_time = 30.0 s"), std::string::npos) << srv.response.message;
+    EXPECT_NE(srv.response.message.find("iterations fit"), std::string::npos) << srv.response.message;
+    EXPECT_LT(took, 20.0) << "a refused request must not be refined first";
+    std::printf("refused in %.2f s: %s\n", took, srv.response.message.c_str());
+  }
+  // A call within the budget that takes a few seconds (every object, 5x the configured iterations): while it
+  // is served, diagnostics report streaming as paused; afterwards as running again.
+  diffdope_ros::Refine srv;
+  srv.request.iterations = 200;
+  const ros::WallTime t0 = ros::WallTime::now();
+  ASSERT_TRUE(call(srv));
+  const ros::WallTime t1 = ros::WallTime::now();
+  ASSERT_TRUE(srv.response.success) << srv.response.message;
+  std::printf("200-iteration call took %.2f s\n", (t1 - t0).toSec());
+  ros::WallDuration(2.5).sleep();  // diagnostics go out once a second
+  // on_request: there is no streaming to pause, and diagnostics say that instead.
+  const std::string busy = world->expect_streaming ? "paused for " : "off (mode on_request); serving a ~refine call";
+  const std::string idle = world->expect_streaming ? "running" : "off (mode on_request)";
+  bool said_busy = false;
+  for (const auto& v : world->streamingBetween(t0, t1)) said_busy |= v.rfind(busy, 0) == 0;
+  const double took = (t1 - t0).toSec();
+  if (took > 2.2) EXPECT_TRUE(said_busy) << "no diagnostics said '" << busy << "' during a " << took << " s call";
+  else std::printf("the call was too short to be seen by diagnostics at 1 Hz: 'paused' not checked\n");
+  const auto after = world->streamingBetween(t1 + ros::WallDuration(1.2), ros::WallTime::now());
+  ASSERT_FALSE(after.empty()) << "no diagnostics after the call";
+  EXPECT_EQ(after.back(), idle);
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -213,6 +271,7 @@ int main(int argc, char** argv) {
   }
   auto truth_sub = nh.subscribe("/ground_truth", 100, &World::onTruth, &w);
   auto refined_sub = nh.subscribe("/diffdope_refiner/refined_poses", 100, &World::onRefined, &w);
+  auto diagnostics_sub = nh.subscribe("/diagnostics", 100, &World::onDiagnostics, &w);
   ros::AsyncSpinner spinner(2);
   spinner.start();
   if (!ros::service::waitForService(kService, ros::Duration(60))) {

@@ -116,9 +116,20 @@ TEST(Refiner, SuccessiveHalvingDropsTheWorseHalfThreeTimes) {
   EXPECT_EQ(runs_by_length, (std::map<size_t, int>{{5, 8}, {10, 4}, {15, 2}, {21, 2}}));
   EXPECT_EQ(r.run_histories[r.winner].size(), 21u);
   for (double loss : r.run_losses) EXPECT_GE(loss, r.loss.total);
+  // planned_evaluations() (the service's time estimate) counts what the refinement evaluated, + 2 for scoring.
+  auto evaluated = [](const RefineResult& res) {
+    long n = 0;
+    for (const auto& h : res.run_histories) n += long(h.size());
+    return n;
+  };
+  EXPECT_EQ(evaluated(r) + 2, planned_evaluations(o));
   o.successive_halving = false;
   const RefineResult all = Refiner(o).refine(s.cam, s.obs, s.mesh, init);
   for (const auto& h : all.run_histories) EXPECT_EQ(h.size(), 21u);
+  EXPECT_EQ(evaluated(all) + 2, planned_evaluations(o));
+  o.successive_halving = true;
+  o.coarse_fraction = 0.5;
+  EXPECT_EQ(evaluated(Refiner(o).refine(s.cam, s.obs, s.mesh, init)) + 2, planned_evaluations(o));
 }
 
 TEST(Refiner, SeveralStartsTheBetterOneWins) {
