@@ -11,6 +11,7 @@
 #include <signal.h>
 #include <unistd.h>
 
+#include <atomic>
 #include <chrono>
 #include <cstdint>
 #include <cstring>
@@ -24,6 +25,7 @@
 #include <vector>
 
 #include "diffdope/mesh.hpp"
+#include "diffdope/thread_pool.hpp"
 #include "isolated_call.hpp"
 
 namespace fs = std::filesystem;
@@ -337,5 +339,38 @@ TEST(IsolatedCall, ARunawayAllocationInTheChildHitsItsMemoryLimit) {
   } catch (const std::runtime_error& e) {
     EXPECT_NE(std::string(e.what()).find("ran out of memory"), std::string::npos) << e.what();
   }
+}
+
+/// This process's address space in bytes (VmSize).
+size_t address_space_in_use() {
+  std::ifstream status("/proc/self/status");
+  for (std::string line; std::getline(status, line);)
+    if (line.rfind("VmSize:", 0) == 0) return size_t(std::stoull(line.substr(7))) * 1024;
+  return 0;
+}
+
+TEST(ThreadPool, MoreThreadsThanTheSystemGivesIsAnErrorNotAHang) {
+  // `render.threads: 100000` used to hang for ever: the pool's constructor threw while its started workers
+  // waited. In a child whose address space leaves room for a few thread stacks only (the thread limit itself
+  // cannot be reached as root), asking for 256 threads must fail with a message, and quickly.
+  const size_t in_use = address_space_in_use();
+  ASSERT_GT(in_use, 0u);
+  IsolationLimits l;
+  l.address_space_bytes = in_use + (size_t(256) << 20);  // ~256 MB more: a few 8 MB stacks and malloc arenas
+  l.timeout_s = 30;  // a hang is reported as "took longer than"
+  const std::string answer = run_isolated([]() -> std::string {
+    try {
+      ThreadPool pool(256);
+      return "started " + std::to_string(pool.size()) + " threads";
+    } catch (const std::runtime_error& e) {
+      return e.what();
+    }
+  }, l, "starting threads");
+  EXPECT_NE(answer.find("thread pool: could not start 256 threads"), std::string::npos) << answer;
+  // The pool still works at a size the system allows.
+  ThreadPool pool(4);
+  std::atomic<int> sum{0};
+  pool.parallel_for(100, [&](int i, int) { sum += i; });
+  EXPECT_EQ(sum.load(), 4950);
 }
 #endif
