@@ -12,23 +12,31 @@ struct Observation {
   cv::Mat depth;  // CV_32FC1, metres; 0 or NaN = no reading; empty = no depth
   cv::Mat mask;   // CV_32FC1, object weight S in [0, 1] (0/1 for a binary mask); empty = no mask
   cv::Mat edges;  // CV_32FC1 in [0, 1], observed edge map (see observed_edges()); empty = no edge term
+  /// CV_32FC2: Sobel x and y of log(grey + epsilon) of rgb (observed_texture()); empty = no texture term.
+  cv::Mat texture;
 
   bool has_rgb() const { return !rgb.empty(); }
   bool has_depth() const { return !depth.empty(); }
   bool has_mask() const { return !mask.empty(); }
   bool has_edges() const { return !edges.empty(); }
+  bool has_texture() const { return !texture.empty(); }
 
   /// Throws std::invalid_argument naming the image and the problem (type, size mismatch with the camera).
   void validate(const Camera& camera) const;
 
   /// Resized copy for `scaled_camera`: colour and mask area-averaged (the mask becomes fractional at its
   /// border), depth averaged over the valid readings of each block (blocks less than half measured: no reading).
+  /// The texture gradients are not carried over (they depend on the scale): compute them again.
   Observation resized(const Camera& scaled_camera) const;
 };
 
 /// The paper's observed edge map: Canny edges of the grey image (thresholds `low`, `high` on 8-bit grey),
 /// softened by a Gaussian of `sigma` pixels and rescaled so that an edge line peaks at 1.
 cv::Mat observed_edges(const cv::Mat& rgb_float, double low = 50, double high = 150, double sigma = 1.0);
+
+/// The texture term's observed side (LossOptions::weight_texture): Sobel x and y (3x3, OpenCV's weights) of
+/// log(grey + epsilon), grey = the mean of the channels (as the renderer's grey), CV_32FC2.
+cv::Mat observed_texture(const cv::Mat& rgb_float, double epsilon);
 
 /// Converts a colour image: 8UC3 / 16UC3 / 32FC3 (assumed RGB unless `bgr`), 8UC1 / 32FC1 grey.
 cv::Mat to_rgb_float(const cv::Mat& image, bool bgr, const std::string& what = "rgb");

@@ -4,6 +4,7 @@
 // plain gradient descent, no momentum; the run with the lowest loss wins.
 #include <cstdint>
 #include <functional>
+#include <map>
 #include <string>
 #include <vector>
 
@@ -12,6 +13,7 @@
 #include "diffdope/observation.hpp"
 #include "diffdope/pose.hpp"
 #include "diffdope/renderer.hpp"
+#include "diffdope/shape_rotations.hpp"
 
 namespace diffdope {
 
@@ -42,6 +44,18 @@ struct RefinerOptions {
   /// polishes.
   double coarse_fraction = 0.5;  // in [0, 1)
   double coarse_scale = 0.5;     // in [0.05, 1]; image_scale * coarse_scale >= kMinImageScale
+  /// Hard starts on (nearly) symmetric shapes (shape_rotations.hpp): rotations about the surface's principal
+  /// axes that move the surface by at most this fraction of its diameter (a bottle about its axis: every 30
+  /// degrees; a box: its half turns) give poses that silhouette and depth cannot tell apart, and gradient
+  /// descent does not cross between them (a print's basin is a few pixels wide). When the fine phase begins
+  /// (silhouette and depth have done their work), every run is evaluated turned by each of them and goes on
+  /// from whichever has the lowest loss, if lower than its own by more than 1 % (a scan: forward renders only,
+  /// no step). 0 = off (the paper's algorithm).
+  double explore_tolerance = 0.015;  // [0, 0.2]
+  /// Weight of the texture term (loss.weight_texture) added to the loss the scan compares turns with. Off by
+  /// default: it settles ties on easy starts but misjudges hard ones, whose print is still a few pixels off
+  /// when the scan comes (README figures).
+  double explore_texture_weight = 0.0;  // [0, LossOptions::kMaxWeight]
   LossOptions loss;             // term weights (all 1 as in the paper) and robustness constants
   uint64_t seed = 0;            // learning-rate draws; same seed, same inputs -> same result
   /// Stop when no run has improved its best loss by more than early_stop_tolerance (relative) for
@@ -95,6 +109,7 @@ struct RefineResult {
   std::vector<std::vector<double>> run_histories;  // every run's loss at every iteration it ran
   int winner = -1;
   int start = 0;                      // index of the initial pose the winning run started from
+  int scan_turns = 0;                 // runs the shape scan (explore_tolerance) turned to another rotation
   int iterations = 0;                 // iterations actually run (early stop)
   double time_ms = 0;                 // wall time of refine() (refine_all(): from the call's start to this object's end)
   // Quality scores at the refined pose (at the refiner's image scale).
@@ -112,6 +127,7 @@ struct ObjectTarget {
   Pose initial;
   cv::Mat mask;  // this object's visible mask (CV_32FC1, or any type to_mask_float takes); may be empty
   std::vector<Pose> alternatives;  // further initial poses; the runs are shared out among all of them
+  bool explore = true;  // false: no shape scan (explore_tolerance), e.g. a tracked start to stay on
 };
 
 class Refiner {
@@ -147,13 +163,18 @@ class Refiner {
   std::function<void(int iteration, int total, double best_loss)> on_iteration;
 
  private:
+  /// The model-frame turns the shape scan tries for `mesh` (none when not exploring).
+  std::vector<Pose> shape_turns(const Mesh& mesh, bool explore);
+
   RefinerOptions options_;
   std::unique_ptr<Renderer> renderer_;
+  std::map<uint64_t, std::vector<ShapeRotation>> shape_rotations_;  // by Mesh::content_id(), analysed once
 };
 
 /// Hypothesis evaluations (one render + loss + gradient of one pose) that refining one object with `o` costs at
-/// most: the runs of every iteration, less those successive halving drops, and the final scoring. An early stop
-/// only lowers it. The unit of RefineTimeEstimator (refine_time.hpp).
+/// most: the runs of every iteration, less those successive halving drops, the shape scan as for a shape with
+/// the most turns (kMaxShapeTurns; an asymmetric one has none) and the final scoring. An early stop only
+/// lowers it. The unit of RefineTimeEstimator (refine_time.hpp).
 long planned_evaluations(const RefinerOptions& o);
 
 /// One plain gradient step of the refiner's parametrisation: translation of the object's centre `pivot`

@@ -56,6 +56,12 @@ struct LossOptions {
   double weight_mask = 1.0;
   double weight_edges = 0.0;      // off unless asked for (see the README's figures)
   double edge_scale = 0.4;        // Sobel magnitude at which E_render = 0.5 (about a grey step of 0.1)
+  /// Texture under real lighting: inside the object (observed mask eroded by a pixel, render fully covered),
+  /// |Sobel(log(grey_obs + eps)) - Sobel(log(grey_render + eps))| summed over x and y. A log image's gradient
+  /// does not see a light's strength or colour, nor shading that varies slowly across the object; a print's
+  /// edges stay. Our renders are flat albedo, real images are lit: the plain rgb term mostly sees the lighting.
+  double weight_texture = 0.0;
+  double texture_epsilon = 0.03;  // grey offset inside the log: keeps dark, noisy pixels from dominating
   double rgb_miss = 0.5;          // cost of an observed object pixel the render misses (colour term)
   double depth_truncation = 0.05; // metres; larger depth errors (noise, occluders) count as tau
   /// Metres: where the observed depth is this much nearer than the render, an occluder hides the object, so
@@ -69,7 +75,7 @@ struct LossOptions {
 
 /// One hypothesis' loss: per-term means (unweighted), the weighted total, and d(total)/d(delta).
 struct LossValue {
-  double rgb = 0, depth = 0, mask = 0, edges = 0;
+  double rgb = 0, depth = 0, mask = 0, edges = 0, texture = 0;
   double total = 0;
   Vector6d gradient = Vector6d::Zero();  // [0..2] per metre of translation, [3..5] per radian (see pose.hpp)
 };

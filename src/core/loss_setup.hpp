@@ -13,6 +13,7 @@ namespace diffdope {
 struct LossSetup {
   PixelLossParams P{};
   float k_edges = 0.f, edge_scale = 0.f;
+  float k_texture = 0.f, texture_epsilon = 0.f;
   double n_rgb = 0, n_depth = 0;
   bool has_rgb = false, has_mask = false;
 };
@@ -42,17 +43,21 @@ inline LossSetup make_loss_setup(const Camera& camera, const Observation& obs, c
   P.occlusion_margin = static_cast<float>(loss.occlusion_margin);
   s.k_edges = (obs.has_edges() && s.n_rgb > 0) ? static_cast<float>(loss.weight_edges / s.n_rgb) : 0.f;
   s.edge_scale = static_cast<float>(loss.edge_scale);
+  s.k_texture = (obs.has_texture() && s.n_rgb > 0) ? static_cast<float>(loss.weight_texture / s.n_rgb) : 0.f;
+  s.texture_epsilon = static_cast<float>(loss.texture_epsilon);
   return s;
 }
 
 /// Per-term means and the weighted total from the per-pixel sums.
 inline void finish_loss(const LossSetup& s, double sum_rgb, double sum_depth, double sum_mask, double sum_edges,
-                        LossValue* res) {
+                        double sum_texture, LossValue* res) {
   res->edges = s.n_rgb > 0 && s.k_edges != 0.f ? sum_edges / s.n_rgb : 0.0;
+  res->texture = s.n_rgb > 0 && s.k_texture != 0.f ? sum_texture / s.n_rgb : 0.0;
   res->rgb = s.n_rgb > 0 && s.has_rgb ? sum_rgb / s.n_rgb : 0.0;
   res->depth = s.n_depth > 0 ? sum_depth / s.n_depth : 0.0;
   res->mask = s.n_rgb > 0 && s.has_mask ? sum_mask / s.n_rgb : 0.0;
-  res->total = s.P.k_rgb * sum_rgb + s.P.k_depth * sum_depth + s.P.k_mask * sum_mask + s.k_edges * sum_edges;
+  res->total = s.P.k_rgb * sum_rgb + s.P.k_depth * sum_depth + s.P.k_mask * sum_mask + s.k_edges * sum_edges +
+               s.k_texture * sum_texture;
 }
 
 }  // namespace diffdope

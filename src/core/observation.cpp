@@ -36,7 +36,10 @@ void Observation::validate(const Camera& camera) const {
     throw std::invalid_argument("edges: expected CV_32FC1 in [0,1], got " + type_name(edges));
   check_size(mask, camera, "mask");
   check_size(edges, camera, "edges");
-  for (const cv::Mat* m : {&rgb, &depth, &mask, &edges})
+  if (has_texture() && texture.type() != CV_32FC2)
+    throw std::invalid_argument("texture: expected CV_32FC2 (observed_texture()), got " + type_name(texture));
+  check_size(texture, camera, "texture");
+  for (const cv::Mat* m : {&rgb, &depth, &mask, &edges, &texture})
     if (!m->empty() && !m->isContinuous())
       throw std::invalid_argument("observation images must be continuous in memory (clone() a sub-image)");
 }
@@ -77,6 +80,17 @@ cv::Mat observed_edges(const cv::Mat& rgb_float, double low, double high, double
     cv::min(soft, 1.0, soft);
   }
   return soft;
+}
+
+cv::Mat observed_texture(const cv::Mat& rgb_float, double epsilon) {
+  cv::Mat grey, log_grey, sx, sy, out;
+  cv::transform(rgb_float, grey, cv::Matx13f(1.f / 3, 1.f / 3, 1.f / 3));
+  cv::log(grey + epsilon, log_grey);
+  // Zero outside the image, as the renderer's Sobel reads nothing outside its region.
+  cv::Sobel(log_grey, sx, CV_32F, 1, 0, 3, 1, 0, cv::BORDER_CONSTANT);
+  cv::Sobel(log_grey, sy, CV_32F, 0, 1, 3, 1, 0, cv::BORDER_CONSTANT);
+  cv::merge(std::vector<cv::Mat>{sx, sy}, out);
+  return out;
 }
 
 cv::Mat to_rgb_float(const cv::Mat& image, bool bgr, const std::string& what) {

@@ -17,15 +17,17 @@ class RefineRun {
   /// rgb / depth / edges already at the refiner's scale, shared by the objects; then only the mask is resized.
   /// `coarse_frame` likewise at image_scale * coarse_scale (see RefinerOptions::coarse_fraction).
   RefineRun(const RefinerOptions& options, const Camera& camera, const Observation& observed, const Mesh& mesh,
-            const std::vector<Pose>& initials, const Observation* scaled_frame = nullptr,
-            const Observation* coarse_frame = nullptr);
+            const std::vector<Pose>& initials, std::vector<Pose> shape_turns = {},
+            const Observation* scaled_frame = nullptr, const Observation* coarse_frame = nullptr);
 
   bool done() const { return done_; }
-  /// The poses to evaluate this iteration (the active runs).
+  /// The poses to evaluate this iteration (the active runs; during the shape scan, each turned by every
+  /// shape turn).
   const std::vector<Pose>& batch();
-  /// Gradients are needed except on the last iteration.
-  bool with_gradient() const { return k_ < options_.iterations; }
-  /// Takes this iteration's values for batch(), keeps each run's best and steps the runs.
+  /// Gradients are needed except on the last iteration and in the shape scan (call after batch()).
+  bool with_gradient() const { return !scanning_ && k_ < options_.iterations; }
+  /// Takes this iteration's values for batch(), keeps each run's best and steps the runs (after the scan: turns
+  /// each run to its best turned pose, without a step).
   void absorb(const std::vector<LossValue>& values, const std::function<void(int, int, double)>& on_iteration);
   /// Winner and quality scores (renders the refined pose once).
   RefineResult finish(Renderer& renderer);
@@ -34,7 +36,8 @@ class RefineRun {
   const Camera& camera() const { return coarse() ? coarse_.cam : fine_.cam; }
   const Observation& observation() const { return coarse() ? coarse_.obs : fine_.obs; }
   bool coarse() const { return k_ < switch_at_; }
-  const LossOptions& loss() const { return loss_; }
+  /// The loss of this iteration's batch() (the scan's adds the texture term; call after batch()).
+  const LossOptions& loss() const { return scanning_ ? scan_loss_ : loss_; }
   const Mesh& mesh() const { return mesh_; }
 
  private:
@@ -48,7 +51,7 @@ class RefineRun {
   };
   Level fine_, coarse_;
   int switch_at_ = 0;  // first iteration at the fine scale (0: no coarse phase)
-  LossOptions loss_;
+  LossOptions loss_, scan_loss_;
   bool has_mask_ = false;
   double diameter_ = 1.0;
   RefineResult res_;
@@ -58,6 +61,12 @@ class RefineRun {
   int k_ = 0, stale_ = 0;
   int steps_ = 0;  // iterations stepped (k_ jumps when the coarse phase stalls)
   int halvings_ = 0;  // successive halvings done (of three)
+  // The shape scan (RefinerOptions::explore_tolerance): once, when the fine phase begins. A run turns only to a
+  // pose whose loss is lower than its own by more than kScanMargin (relative).
+  static constexpr double kScanMargin = 0.01;
+  std::vector<Pose> turns_;  // model-frame turns tried on every run
+  int scan_at_ = -1;         // the iteration whose batch() is preceded by the scan (-1: none)
+  bool scanning_ = false, scanned_ = false;
   double best_overall_;
   bool done_ = false;
 };

@@ -66,6 +66,11 @@ int halvings_due(int k, int iters) {
   return due;
 }
 
+/// Whether the loss or the shape scan compares texture gradients (observed_texture() is then needed).
+bool uses_texture(const RefinerOptions& o) {
+  return o.loss.weight_texture > 0 || (o.explore_tolerance > 0 && o.explore_texture_weight > 0);
+}
+
 /// The frame's rgb / depth at `scale`, with the paper's edge map when the loss uses it.
 Observation scale_frame(const Camera& camera, const Observation& frame, const RefinerOptions& o, double scale) {
   Observation f;
@@ -75,6 +80,7 @@ Observation scale_frame(const Camera& camera, const Observation& frame, const Re
   f.validate(camera);
   if (scale != 1.0) f = f.resized(scaled_camera(camera, scale));
   if (o.loss.weight_edges > 0 && f.has_rgb() && !f.has_edges()) f.edges = observed_edges(f.rgb);
+  if (uses_texture(o) && f.has_rgb()) f.texture = observed_texture(f.rgb, o.loss.texture_epsilon);
   return f;
 }
 
@@ -98,13 +104,27 @@ RefineResult Refiner::refine(const Camera& camera, const Observation& observed, 
 
 RefineResult Refiner::refine(const Camera& camera, const Observation& observed, const Mesh& mesh,
                              const std::vector<Pose>& initials) {
-  RefineRun run(options_, camera, observed, mesh, initials);
+  RefineRun run(options_, camera, observed, mesh, initials, shape_turns(mesh, true));
   std::vector<LossValue> values;
   while (!run.done()) {
-    renderer_->evaluate(run.camera(), mesh, run.observation(), run.batch(), run.loss(), run.with_gradient(), values);
+    const std::vector<Pose>& poses = run.batch();  // (before with_gradient() and loss(): a scan differs)
+    renderer_->evaluate(run.camera(), mesh, run.observation(), poses, run.loss(), run.with_gradient(), values);
     run.absorb(values, on_iteration);
   }
   return run.finish(*renderer_);
+}
+
+std::vector<Pose> Refiner::shape_turns(const Mesh& mesh, bool explore) {
+  if (!explore || !(options_.explore_tolerance > 0) || mesh.content_id() == 0) return {};
+  auto cached = shape_rotations_.find(mesh.content_id());
+  if (cached == shape_rotations_.end()) {
+    if (shape_rotations_.size() >= 64) shape_rotations_.clear();  // a node that sees many meshes stays bounded
+    cached = shape_rotations_.emplace(mesh.content_id(), analyse_shape_rotations(mesh)).first;
+  }
+  std::vector<Pose> turns;
+  for (const ShapeRotation& r : ambiguous_rotations(cached->second, options_.explore_tolerance, kMaxShapeTurns))
+    turns.push_back(r.as_pose());
+  return turns;
 }
 
 namespace {
@@ -136,9 +156,10 @@ void check_in_view(const Camera& cam, const Mesh& mesh, const Pose& pose, double
 }  // namespace
 
 RefineRun::RefineRun(const RefinerOptions& o, const Camera& camera, const Observation& observed, const Mesh& mesh,
-                     const std::vector<Pose>& initials, const Observation* scaled_frame,
-                     const Observation* coarse_frame)
-    : options_(o), mesh_(mesh), start_time_(std::chrono::steady_clock::now()), initials_(initials) {
+                     const std::vector<Pose>& initials, std::vector<Pose> shape_turns,
+                     const Observation* scaled_frame, const Observation* coarse_frame)
+    : options_(o), mesh_(mesh), start_time_(std::chrono::steady_clock::now()), initials_(initials),
+      turns_(std::move(shape_turns)) {
   observed.validate(camera);
   if (!observed.has_rgb() && !observed.has_depth())
     throw std::invalid_argument("refine: need at least an rgb or a depth image");
@@ -168,11 +189,14 @@ RefineRun::RefineRun(const RefinerOptions& o, const Camera& camera, const Observ
       l.obs.rgb = shared->rgb;
       l.obs.depth = shared->depth;
       l.obs.edges = shared->edges;
+      l.obs.texture = shared->texture;
     } else {
       l.obs = scale == 1.0 ? observed : observed.resized(l.cam);
     }
     // The paper's edge term: Canny edges of the observed image, computed at this scale.
     if (loss_.weight_edges > 0 && l.obs.has_rgb() && !l.obs.has_edges()) l.obs.edges = observed_edges(l.obs.rgb);
+    if (uses_texture(o) && l.obs.has_rgb() && !l.obs.has_texture())
+      l.obs.texture = observed_texture(l.obs.rgb, loss_.texture_epsilon);
     if (!l.obs.has_mask()) {
       l.obs.mask = window_mask(l.cam, mesh, initial, o.no_mask_window);
       for (int j = 1; j < starts; ++j) l.obs.mask = cv::max(l.obs.mask, window_mask(l.cam, mesh, initials[j], o.no_mask_window));
@@ -184,8 +208,12 @@ RefineRun::RefineRun(const RefinerOptions& o, const Camera& camera, const Observ
   if (has_mask_ && cv::countNonZero(fine_.obs.mask > 0) == 0)
     throw std::invalid_argument("refine: the object mask is empty");
   if (!has_mask_) loss_.weight_mask = 0;  // the window is not an observation of the silhouette
+  scan_loss_ = loss_;
+  scan_loss_.weight_texture += o.explore_texture_weight;
   switch_at_ = coarse_iterations(o);
   if (switch_at_ > 0) coarse_ = make_level(o.image_scale * o.coarse_scale, coarse_frame);
+  // The scan comes when the fine phase begins (without a coarse phase: half-way), never on the last iteration.
+  if (!turns_.empty()) scan_at_ = switch_at_ > 0 ? switch_at_ : (o.iterations >= 2 ? o.iterations / 2 : -1);
 
   const int B = o.batch_size;
   std::mt19937_64 rng(o.seed);
@@ -230,6 +258,16 @@ const std::vector<Pose>& RefineRun::batch() {
     best_overall_ = std::numeric_limits<double>::infinity();
     stale_ = 0;
   }
+  if (k_ == scan_at_ && !scanned_ && !last) {  // every run turned by every shape turn (itself first)
+    scanning_ = true;
+    const size_t n = 1 + turns_.size();
+    batch_.resize(active_.size() * n);
+    for (size_t j = 0; j < active_.size(); ++j) {
+      batch_[j * n] = poses_[active_[j]];
+      for (size_t t = 0; t < turns_.size(); ++t) batch_[j * n + 1 + t] = poses_[active_[j]] * turns_[t];
+    }
+    return batch_;
+  }
   batch_.resize(active_.size());
   for (size_t j = 0; j < active_.size(); ++j) batch_[j] = poses_[active_[j]];
   return batch_;
@@ -239,6 +277,22 @@ void RefineRun::absorb(const std::vector<LossValue>& values, const std::function
   const RefinerOptions& o = options_;
   const int iters = o.iterations, starts = int(initials_.size());
   const bool last = k_ == iters;
+  if (scanning_) {  // each run goes on from its best turned pose; no step
+    const size_t n = 1 + turns_.size();
+    for (size_t j = 0; j < active_.size(); ++j) {
+      size_t best = 0;
+      for (size_t t = 1; t < n; ++t)
+        if (values[j * n + t].total < values[j * n + best].total) best = t;
+      // A turn must be clearly better: on a print the loss barely sees, near ties would pick one at random
+      // and flip starts that were right (measured on dev_bop's easy starts).
+      if (best == 0 || !(values[j * n + best].total < (1.0 - kScanMargin) * values[j * n].total)) continue;
+      poses_[active_[j]] = batch_[j * n + best];
+      ++res_.scan_turns;
+    }
+    scanning_ = false;
+    scanned_ = true;
+    return;
+  }
   if (k_ == 0) {
     res_.initial_loss = values[0].total;
     for (int j = 1; j < std::min(starts, int(values.size())); ++j)
@@ -357,7 +411,7 @@ std::vector<RefineResult> Refiner::refine_all(const Camera& camera, const Observ
       if (!t.mask.empty()) o.mask = t.mask.type() == CV_32FC1 ? t.mask : to_mask_float(t.mask);
       std::vector<Pose> initials{t.initial};
       initials.insert(initials.end(), t.alternatives.begin(), t.alternatives.end());
-      runs[k] = std::make_unique<RefineRun>(options_, camera, o, *t.mesh, initials,
+      runs[k] = std::make_unique<RefineRun>(options_, camera, o, *t.mesh, initials, shape_turns(*t.mesh, t.explore),
                                             shared_frame ? &*shared_frame : nullptr,
                                             coarse_frame ? &*coarse_frame : nullptr);
     } catch (const std::exception& e) {
@@ -383,8 +437,8 @@ std::vector<RefineResult> Refiner::refine_all(const Camera& camera, const Observ
         ObjectBatch b;
         b.mesh = &r.mesh();
         b.mask = r.observation().mask;
+        b.poses = r.batch();  // (before with_gradient() and loss(): a scan differs)
         b.loss = r.loss();
-        b.poses = r.batch();
         batches.push_back(std::move(b));
         which.push_back(k);
         with_gradient = with_gradient || r.with_gradient();
@@ -430,11 +484,15 @@ namespace diffdope {
 long planned_evaluations(const RefinerOptions& o) {
   long total = 0;
   int active = std::max(o.batch_size, 1), halvings = 0;
+  // The shape scan, as RefineRun plans it, with as many turns as any shape gets.
+  const int switch_at = coarse_iterations(o);
+  const int scan_at = !(o.explore_tolerance > 0) ? -1 : switch_at > 0 ? switch_at : (o.iterations >= 2 ? o.iterations / 2 : -1);
   for (int k = 0; k <= o.iterations; ++k) {  // as RefineRun::batch(): k == iterations only evaluates
     for (const int due = halvings_due(k, o.iterations); o.successive_halving && k < o.iterations && halvings < due;
          ++halvings)
       active = (active + 1) / 2;
     total += active;
+    if (k == scan_at && k < o.iterations) total += long(active) * (1 + kMaxShapeTurns);
   }
   return total + 2;  // finish(): the initial loss at the fine scale and the scoring render
 }

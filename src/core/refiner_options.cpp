@@ -56,6 +56,8 @@ RefinerOptions parse(const YAML::Node& root, RefinerOptions o, const std::string
     read(root, "image_scale", o.image_scale, used);
     read(root, "coarse_fraction", o.coarse_fraction, used);
     read(root, "coarse_scale", o.coarse_scale, used);
+    read(root, "explore_tolerance", o.explore_tolerance, used);
+    read(root, "explore_texture_weight", o.explore_texture_weight, used);
     read(root, "seed", o.seed, used);
     read(root, "successive_halving", o.successive_halving, used);
     read(root, "early_stop_patience", o.early_stop_patience, used);
@@ -73,6 +75,8 @@ RefinerOptions parse(const YAML::Node& root, RefinerOptions o, const std::string
       read(l, "weight_mask", o.loss.weight_mask, lu);
       read(l, "weight_edges", o.loss.weight_edges, lu);
       read(l, "edge_scale", o.loss.edge_scale, lu);
+      read(l, "weight_texture", o.loss.weight_texture, lu);
+      read(l, "texture_epsilon", o.loss.texture_epsilon, lu);
       read(l, "rgb_miss", o.loss.rgb_miss, lu);
       read(l, "depth_truncation", o.loss.depth_truncation, lu);
       read(l, "occlusion_margin", o.loss.occlusion_margin, lu);
@@ -171,7 +175,10 @@ void LossOptions::validate() const {
   check("loss.weight_depth", weight_depth, 0, kMaxWeight);
   check("loss.weight_mask", weight_mask, 0, kMaxWeight);
   check("loss.weight_edges", weight_edges, 0, kMaxWeight);
-  if (weight_rgb + weight_depth + weight_mask + weight_edges == 0) check.fail("every loss weight is 0: nothing to minimise");
+  check("loss.weight_texture", weight_texture, 0, kMaxWeight);
+  if (weight_rgb + weight_depth + weight_mask + weight_edges + weight_texture == 0)
+    check.fail("every loss weight is 0: nothing to minimise");
+  check("loss.texture_epsilon", texture_epsilon, 1e-3, 1);
   check("loss.edge_scale", edge_scale, 1e-3, 100);
   check("loss.rgb_miss", rgb_miss, 0, 10);
   check("loss.depth_truncation", depth_truncation, 1e-4, 10, " metres");
@@ -189,6 +196,8 @@ void RefinerOptions::validate() const {
   check("image_scale", image_scale, kMinImageScale, 4);
   if (!(coarse_fraction >= 0 && coarse_fraction < 1)) check.fail("coarse_fraction must be in [0, 1)");
   check("coarse_scale", coarse_scale, 0.05, 1);
+  check("explore_tolerance", explore_tolerance, 0, 0.2);
+  check("explore_texture_weight", explore_texture_weight, 0, LossOptions::kMaxWeight);
   if (coarse_fraction > 0 && image_scale * coarse_scale < kMinImageScale) {
     std::ostringstream m;
     m << "image_scale * coarse_scale = " << image_scale * coarse_scale << " is below " << kMinImageScale;

@@ -127,7 +127,7 @@ class PipelineRenderer final : public Renderer {
     bool valid = false;
     LossOptions loss{};
     int width = 0, height = 0;
-    bool has_rgb = false, has_depth = false, has_mask = false, has_edges = false;
+    bool has_rgb = false, has_depth = false, has_mask = false, has_edges = false, has_texture = false;
     uint64_t depth_generation = 0, mask_generation = 0;
     LossSetup setup;
     PixelRect box;  // observed mask's box (the whole image without a mask)
@@ -140,7 +140,7 @@ class PipelineRenderer final : public Renderer {
     PixelRect box;
   };
   struct FrameImages {
-    const float *I, *D, *E;
+    const float *I, *D, *E, *T;
   };
   struct Call {
     Pipeline p;
@@ -332,6 +332,8 @@ class PipelineRenderer final : public Renderer {
       op.S = objects[k].S;
       op.k_edges = s.k_edges;
       op.edge_scale = s.edge_scale;
+      op.k_texture = s.k_texture;
+      op.texture_epsilon = s.texture_epsilon;
     }
     exec_.upload(d_objects_, object_params_.data(), object_params_.size());
     p.objects = d_objects_.ptr;
@@ -358,13 +360,14 @@ class PipelineRenderer final : public Renderer {
   /// The frame's images on the executor (uploaded when they changed); a new depth image invalidates the loss
   /// constants of every object.
   FrameImages upload_frame(const Observation& frame) {
-    FrameImages f{nullptr, nullptr, nullptr};
+    FrameImages f{nullptr, nullptr, nullptr, nullptr};
     bool changed = false;
     f.I = frame.has_rgb() ? exec_.image(0, frame.rgb, &changed) : nullptr;
     changed = false;
     f.D = frame.has_depth() ? exec_.image(1, frame.depth, &changed) : nullptr;
     if (changed) ++depth_generation_;
     f.E = frame.has_edges() ? exec_.image(2, frame.edges, &changed) : nullptr;
+    f.T = frame.has_texture() ? exec_.image(3, frame.texture, &changed) : nullptr;
     return f;
   }
 
@@ -376,13 +379,14 @@ class PipelineRenderer final : public Renderer {
     *S = nullptr;
     if (o.has_mask()) {
       bool changed = false;
-      *S = exec_.image(3 + int(k), o.mask, &changed);
+      *S = exec_.image(4 + int(k), o.mask, &changed);
       if (changed) ++mask_generation_[k];
     }
     SetupCache& c = setups_[k];
     const bool same = c.valid && std::memcmp(&c.loss, &loss, sizeof loss) == 0 && c.width == camera.width &&
                       c.height == camera.height && c.has_rgb == o.has_rgb() && c.has_depth == o.has_depth() &&
                       c.has_mask == o.has_mask() && c.has_edges == o.has_edges() &&
+                      c.has_texture == o.has_texture() &&
                       c.depth_generation == depth_generation_ && c.mask_generation == mask_generation_[k];
     if (!same) {
       c.valid = false;
@@ -391,6 +395,7 @@ class PipelineRenderer final : public Renderer {
       c.loss = loss;
       c.width = camera.width, c.height = camera.height;
       c.has_rgb = o.has_rgb(), c.has_depth = o.has_depth(), c.has_mask = o.has_mask(), c.has_edges = o.has_edges();
+      c.has_texture = o.has_texture();
       c.depth_generation = depth_generation_, c.mask_generation = mask_generation_[k];
       c.valid = true;
     }
@@ -404,23 +409,32 @@ class PipelineRenderer final : public Renderer {
     Pipeline& p = c.p;
     p.I = frame.I;
     p.D = frame.D;
-    bool edges = false;
-    for (const ObjectCall& o : objects) edges = edges || o.setup->setup.k_edges != 0.f;
-    edges = edges && frame.E;  // (k_edges != 0 only with an edge image)
+    bool edges = false, texture = false;
+    for (const ObjectCall& o : objects) {
+      edges = edges || o.setup->setup.k_edges != 0.f;
+      texture = texture || o.setup->setup.k_texture != 0.f;
+    }
+    edges = edges && frame.E;  // (k_edges != 0 only with an edge image, k_texture only with texture gradients)
+    texture = texture && frame.T;
     p.E = edges ? frame.E : nullptr;
+    p.T = texture ? frame.T : nullptr;
     p.with_gradient = with_gradient ? 1 : 0;
     const size_t B = size_t(c.B), N = size_t(c.pixels);
-    out_.reserve(10 * B);
-    exec_.zero(out_.ptr, 10 * B);
+    // Per hypothesis: kSums loss sums (rgb, depth, mask, edges, texture), then 6 gradient components.
+    constexpr int kSums = 5;
+    out_.reserve((kSums + 6) * B);
+    exec_.zero(out_.ptr, (kSums + 6) * B);
     if (!Exec::kWorkerScratch) work_.bind(p, c.vertices, c.triangles, N);
-    const int n = c.max_pixels, n_edges = edges ? n : 0, n_grad = with_gradient ? n : 0;
+    const int n = c.max_pixels, n_edges = edges ? n : 0, n_texture = texture ? n : 0, n_grad = with_gradient ? n : 0;
     // Every stage of the call in one run: on the CPU each hypothesis goes through all of them on one thread.
     std::apply(
         [&](const auto&... forward) {
           const auto steps = std::make_tuple(
-              forward..., Sum<LossStage>{{p}, n, out_.ptr, 4}, Each<GreyStage>{{p}, n_edges},
-              Sum<EdgeStage>{{p}, n_edges, out_.ptr + 3, 4}, Each<EdgeGatherStage>{{p}, n_edges && n_grad ? n : 0},
-              Sum<BackwardStage>{{p}, n_grad, out_.ptr + 4 * B, 6});
+              forward..., Sum<LossStage>{{p}, n, out_.ptr, kSums}, Each<GreyStage>{{p}, edges || texture ? n : 0},
+              Sum<EdgeStage>{{p}, n_edges, out_.ptr + 3, kSums}, Each<EdgeGatherStage>{{p}, n_edges && n_grad ? n : 0},
+              Sum<TextureStage>{{p}, n_texture, out_.ptr + 4, kSums},
+              Each<TextureGatherStage>{{p}, n_texture && n_grad ? n : 0},
+              Sum<BackwardStage>{{p}, n_grad, out_.ptr + kSums * B, 6});
           std::apply(
               [&](const auto&... all) {
                 if constexpr (!Exec::kWorkerScratch) exec_.run(c.B, all...);
@@ -429,8 +443,8 @@ class PipelineRenderer final : public Renderer {
               steps);
         },
         forward_steps(c));
-    double* host = exec_.results(10 * B);
-    exec_.download(host, out_.ptr, 10 * B);
+    double* host = exec_.results((kSums + 6) * B);
+    exec_.download(host, out_.ptr, (kSums + 6) * B);
     exec_.synchronize("evaluate");
     size_t h = 0;
     for (size_t k = 0; k < objects.size(); ++k) {
@@ -441,10 +455,10 @@ class PipelineRenderer final : public Renderer {
           res.rgb = res.depth = res.mask = res.total = std::numeric_limits<double>::infinity();
           continue;
         }
-        const double* s = host + 4 * h;
-        finish_loss(objects[k].setup->setup, s[0], s[1], s[2], s[3], &res);
+        const double* s = host + kSums * h;
+        finish_loss(objects[k].setup->setup, s[0], s[1], s[2], s[3], s[4], &res);
         if (with_gradient)
-          for (int g = 0; g < 6; ++g) res.gradient[g] = host[4 * B + 6 * h + g];
+          for (int g = 0; g < 6; ++g) res.gradient[g] = host[kSums * B + 6 * h + g];
       }
     }
   }

@@ -55,6 +55,8 @@ struct ObjectParams {
   const float* S;  // observed mask (image size), nullptr: S = 1
   float k_edges;   // the paper's edge term weight / normaliser (0: off)
   float edge_scale;
+  float k_texture;  // texture term weight / normaliser (0: off)
+  float texture_epsilon;
 };
 
 /// Per-hypothesis constants of one call.
@@ -76,6 +78,7 @@ struct Pipeline {
   float near_z;
   int image_w, image_h;
   const float *I, *D, *E;  // observed rgb (3 floats per pixel), depth, edges; nullptr when absent
+  const float* T;           // observed texture gradients (2 floats per pixel); nullptr when absent
   int with_gradient;
   Vec3f* cam;
   Vec2f* pix;
@@ -87,6 +90,7 @@ struct Pipeline {
   BlendEvent* events;  // slot 2 * pixel + dir (0: right neighbour, 1: lower)
   unsigned char* has_event;
   float *grey, *g_sx, *g_sy;
+  float *log_grey, *g_tx, *g_ty;  // texture term
 };
 
 /// The per-hypothesis working arrays of a Pipeline (cam .. g_sy) in grow-only buffers Buffer<T> (T* reserve(n)):
@@ -95,7 +99,7 @@ template <template <class> class Buffer>
 struct WorkArrays {
   Buffer<Vec3f> cam;
   Buffer<Vec2f> pix;
-  Buffer<float> area, level, grey, g_sx, g_sy;
+  Buffer<float> area, level, grey, g_sx, g_sy, log_grey, g_tx, g_ty;
   Buffer<unsigned long long> key;
   Buffer<int> tri;
   Buffer<PixelAttr> pre, post, g_post;
@@ -104,7 +108,8 @@ struct WorkArrays {
   Buffer<unsigned char> has_event;
 
   /// Points p's arrays here, sized for that many vertices, triangles and pixels; the gradient's arrays only
-  /// when p.with_gradient, the edge term's only when p.E (otherwise left as they are in p).
+  /// when p.with_gradient, the edge term's only when p.E, the texture term's only when p.T (otherwise left as
+  /// they are in p).
   void bind(Pipeline& p, size_t vertices, size_t triangles, size_t pixels) {
     p.cam = cam.reserve(vertices);
     p.pix = pix.reserve(vertices);
@@ -118,9 +123,11 @@ struct WorkArrays {
     p.events = events.reserve(2 * pixels);
     p.has_event = has_event.reserve(2 * pixels);
     if (p.with_gradient) p.g_post = g_post.reserve(pixels);
-    if (p.E) {
-      p.grey = grey.reserve(pixels);
-      if (p.with_gradient) p.g_sx = g_sx.reserve(pixels), p.g_sy = g_sy.reserve(pixels);
+    if (p.E || p.T) p.grey = grey.reserve(pixels);
+    if (p.E && p.with_gradient) p.g_sx = g_sx.reserve(pixels), p.g_sy = g_sy.reserve(pixels);
+    if (p.T) {
+      p.log_grey = log_grey.reserve(pixels);
+      if (p.with_gradient) p.g_tx = g_tx.reserve(pixels), p.g_ty = g_ty.reserve(pixels);
     }
   }
 };
@@ -366,7 +373,8 @@ struct LossStage : PixelStage<LossStage> {
   }
 };
 
-/// Edge term, stage 1, i: pixel. The render's grey image (mean of the blended colour).
+/// Edge and texture terms, stage 1, i: pixel. The render's grey image (mean of the blended colour) and, for the
+/// texture term, its log.
 struct GreyStage {
   static constexpr const char* kName = "edges grey";
   Pipeline p;
@@ -375,7 +383,9 @@ struct GreyStage {
     const Hypothesis& hy = p.H[h];
     if (i >= hy.w * hy.h) return;
     const PixelAttr& a = p.post[hy.offset + i];
-    p.grey[hy.offset + i] = (a.c[0] + a.c[1] + a.c[2]) / 3.f;
+    const float grey = (a.c[0] + a.c[1] + a.c[2]) / 3.f;
+    p.grey[hy.offset + i] = grey;
+    if (p.T) p.log_grey[hy.offset + i] = logf(grey + p.objects[hy.object].texture_epsilon);
   }
 };
 
@@ -403,6 +413,50 @@ struct EdgeGatherStage : PixelStage<EdgeGatherStage> {
     const Hypothesis& hy = p.H[h];
     if (i >= hy.w * hy.h || !hy.valid || p.objects[hy.object].k_edges == 0.f) return;
     const float g = grey_gradient(p.g_sx + hy.offset, p.g_sy + hy.offset, hy.w, hy.h, lx, ly) / 3.f;
+    for (int ch = 0; ch < 3; ++ch) p.g_post[hy.offset + i].c[ch] += g;
+  }
+};
+
+/// Texture term, stage 2, i: pixel; reduced per hypothesis. texture_term_step() inside the object, and
+/// k * dL/d(Sobel of the log grey) when with_gradient.
+struct TextureStage : PixelStage<TextureStage> {
+  static constexpr const char* kName = "texture";
+  static constexpr int kValues = 1;
+  DD_HOST_DEVICE void pixel(int lx, int ly, int i, int h, double* v) const {
+    const Hypothesis& hy = p.H[h];
+    const ObjectParams& o = p.objects[hy.object];
+    if (i >= hy.w * hy.h || !hy.valid || o.k_texture == 0.f) return;
+    const int q = hy.offset + i;
+    // The weight: the smallest observed mask and coverage over the 3x3 window (0 where it leaves the region or
+    // the image, so the Sobel below never reads outside them).
+    float w = 1.f;
+    for (int dy = -1; dy <= 1; ++dy)
+      for (int dx = -1; dx <= 1; ++dx) {
+        const int x = lx + dx, y = ly + dy, gx = hy.x0 + x, gy = hy.y0 + y;
+        if (x < 0 || y < 0 || x >= hy.w || y >= hy.h || gx < 0 || gy < 0 || gx >= p.image_w || gy >= p.image_h) {
+          w = 0.f;
+        } else {
+          w = fminf(w, p.post[hy.offset + y * hy.w + x].cov);
+          if (o.S) w = fminf(w, o.S[gy * p.image_w + gx]);
+        }
+      }
+    const int pix = (hy.y0 + ly) * p.image_w + hy.x0 + lx;
+    v[0] = texture_term_step(p.log_grey + hy.offset, w, hy.w, hy.h, lx, ly, p.T + 2 * pix, o.k_texture,
+                             p.with_gradient ? p.g_tx + q : nullptr, p.with_gradient ? p.g_ty + q : nullptr);
+  }
+};
+
+/// Texture term, stage 3, i: pixel. Gathers the Sobel gradients into dL/d(log grey), then through the log and
+/// the grey into the pixel's colour gradient.
+struct TextureGatherStage : PixelStage<TextureGatherStage> {
+  static constexpr const char* kName = "texture gather";
+  DD_HOST_DEVICE void pixel(int lx, int ly, int i, int h) const {
+    const Hypothesis& hy = p.H[h];
+    const ObjectParams& o = p.objects[hy.object];
+    if (i >= hy.w * hy.h || !hy.valid || o.k_texture == 0.f) return;
+    const float g_log = grey_gradient(p.g_tx + hy.offset, p.g_ty + hy.offset, hy.w, hy.h, lx, ly);
+    if (g_log == 0.f) return;
+    const float g = g_log / (p.grey[hy.offset + i] + o.texture_epsilon) / 3.f;
     for (int ch = 0; ch < 3; ++ch) p.g_post[hy.offset + i].c[ch] += g;
   }
 };

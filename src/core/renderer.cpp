@@ -32,6 +32,7 @@ std::vector<Observation> Renderer::object_observations(const Camera& camera, con
     obs[k].rgb = frame.rgb;
     obs[k].depth = frame.depth;
     obs[k].edges = frame.edges;
+    obs[k].texture = frame.texture;
     obs[k].mask = b.mask;
     obs[k].validate(camera);
   }

@@ -299,6 +299,10 @@ std::vector<diffdope_ros::RefinedPose> RefinerNodelet::refineAndPublish(
     t.mesh = s.mesh.get();
     t.initial = starts.front().pose;
     for (size_t j = 1; j < starts.size(); ++j) t.alternatives.push_back(starts[j].pose);
+    // The shape scan looks for a turn silhouette and depth cannot see: worth it from a detection or a caller's
+    // pose; a track that is already right would only risk flipping between frames on a weakly printed object.
+    t.explore = starts.front().source == diffdope::SeedSource::kDetector ||
+                starts.front().source == diffdope::SeedSource::kRequest;
     if (!frame.labels.empty()) {
       t.mask = object_mask(frame.labels, s.config.mask_label);
       if (cv::countNonZero(t.mask) == 0) {

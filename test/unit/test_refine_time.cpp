@@ -13,6 +13,7 @@ TEST(PlannedEvaluations, RunsTimesIterationsLessWhatHalvingDrops) {
   RefinerOptions o;
   o.batch_size = 16;
   o.iterations = 100;
+  o.explore_tolerance = 0;  // no shape scan
   o.successive_halving = false;
   EXPECT_EQ(planned_evaluations(o), 16 * 101 + 2);
   o.successive_halving = true;  // 25 iterations each at 16, 8, 4, 2 runs, then the last evaluation at 2

@@ -110,6 +110,7 @@ TEST(Refiner, SuccessiveHalvingDropsTheWorseHalfThreeTimes) {
   RefinerOptions o = test_options();
   o.iterations = 20;
   o.coarse_fraction = 0;
+  o.explore_tolerance = 0;  // (the L-block has no shape turns anyway; planned_evaluations would count them)
   const RefineResult r = Refiner(o).refine(s.cam, s.obs, s.mesh, init);
   std::map<size_t, int> runs_by_length;
   for (const auto& h : r.run_histories) ++runs_by_length[h.size()];
@@ -130,6 +131,11 @@ TEST(Refiner, SuccessiveHalvingDropsTheWorseHalfThreeTimes) {
   o.successive_halving = true;
   o.coarse_fraction = 0.5;
   EXPECT_EQ(evaluated(Refiner(o).refine(s.cam, s.obs, s.mesh, init)) + 2, planned_evaluations(o));
+  // With the shape scan: the 4 runs active when the fine phase begins, each with itself and up to
+  // kMaxShapeTurns turns.
+  RefinerOptions scan = o;
+  scan.explore_tolerance = 0.015;
+  EXPECT_EQ(planned_evaluations(scan), planned_evaluations(o) + 4 * (1 + kMaxShapeTurns));
 }
 
 TEST(Refiner, SeveralStartsTheBetterOneWins) {

@@ -57,6 +57,30 @@ DD_HOST_DEVICE float edge_term_step(const float* grey, int W, int H, int x, int 
   return S * fabsf(observed - e);
 }
 
+/// One pixel of the texture term (LossOptions::weight_texture), as both backends run it: at (x, y) of the
+/// region, w * (|obs_x - Sobel_x(L)| + |obs_y - Sobel_y(L)|) with L = log(grey + eps) the render's (W x H array)
+/// and obs the observed Sobel of its own log grey. The weight w (taken as constant) is the smallest observed
+/// mask and render coverage in the 3x3 window: the term looks inside the object only (silhouettes are the mask
+/// and depth terms' business) and fades in and out with the coverage. When g_tx is non-null, receives
+/// k * dL/d(Sobel x, y) there. Returns the unscaled value.
+DD_HOST_DEVICE float texture_term_step(const float* log_grey, float w, int W, int H, int x, int y,
+                                       const float observed[2], float k, float* g_tx, float* g_ty) {
+  if (g_tx) *g_tx = *g_ty = 0.f;
+  if (!(w > 0.f)) return 0.f;
+  float sx = 0.f, sy = 0.f;
+  for (int dy = -1; dy <= 1; ++dy)
+    for (int dx = -1; dx <= 1; ++dx) {
+      const float g = grey_at(log_grey, W, H, x + dx, y + dy);
+      sx += sobel_x(dx, dy) * g;
+      sy += sobel_y(dx, dy) * g;
+    }
+  if (g_tx) {
+    *g_tx = k * w * signf(sx - observed[0]);
+    *g_ty = k * w * signf(sy - observed[1]);
+  }
+  return w * (fabsf(observed[0] - sx) + fabsf(observed[1] - sy));
+}
+
 /// dL/dgrey at (x, y), gathered from the neighbours' dL/d(Sobel x) and dL/d(Sobel y) (W x H arrays).
 DD_HOST_DEVICE float grey_gradient(const float* g_gx, const float* g_gy, int W, int H, int x, int y) {
   float g = 0.f;
