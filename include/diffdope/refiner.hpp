@@ -51,7 +51,7 @@ struct RefinerOptions {
   /// (silhouette and depth have done their work), every run is evaluated turned by each of them and goes on
   /// from whichever has the lowest loss, if lower than its own by more than 1 % (a scan: forward renders only,
   /// no step). 0 = off (the paper's algorithm).
-  double explore_tolerance = 0.015;  // [0, 0.2]
+  double explore_tolerance = 0.01;  // [0, 0.2]
   /// Weight of the texture term (loss.weight_texture) added to the loss the scan compares turns with. Off by
   /// default: it settles ties on easy starts but misjudges hard ones, whose print is still a few pixels off
   /// when the scan comes (README figures).

@@ -134,7 +134,7 @@ TEST(Refiner, SuccessiveHalvingDropsTheWorseHalfThreeTimes) {
   // With the shape scan: the 4 runs active when the fine phase begins, each with itself and up to
   // kMaxShapeTurns turns.
   RefinerOptions scan = o;
-  scan.explore_tolerance = 0.015;
+  scan.explore_tolerance = 0.01;
   EXPECT_EQ(planned_evaluations(scan), planned_evaluations(o) + 4 * (1 + kMaxShapeTurns));
 }
 

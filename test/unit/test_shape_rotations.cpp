@@ -30,7 +30,7 @@ TEST(ShapeRotations, ABoxIsAmbiguousByHalfTurnsAboutItsThreeAxes) {
   const auto r = ambiguous(box);
   ASSERT_EQ(r.size(), 3u);
   Eigen::Vector3d axes_seen = Eigen::Vector3d::Zero();
-  for (const auto& x : r) {
+  for (const ShapeRotation& x : r) {
     EXPECT_NEAR(degrees(x.angle), 180.0, 1e-9);
     EXPECT_LT(x.discrepancy, 0.002);
     axes_seen += x.axis.cwiseAbs();
@@ -97,7 +97,7 @@ TEST(Refiner, ARollOnlyTheLabelShowsIsFoundByTheShapeScan) {
   o.batch_size = 16;
   o.iterations = 40;
   o.image_scale = 1.0;
-  o.explore_tolerance = 0.015;
+  o.explore_tolerance = 0.01;
   const RefineResult explored = Refiner(o).refine(cam, obs, can, start);
   o.explore_tolerance = 0;
   const RefineResult plain = Refiner(o).refine(cam, obs, can, start);
