@@ -107,7 +107,8 @@ struct RefineResult {
   std::vector<double> learning_rates; // every run's drawn rate
   std::vector<double> history;        // winner's loss at every iteration (the coarse phase's at its own scale)
   std::vector<std::vector<double>> run_histories;  // every run's loss at every iteration it ran
-  int winner = -1;
+  int winner = -1;                    // the run whose best pose is the result (its start's run when no run's
+                                      // fine-phase best beat the start itself)
   int start = 0;                      // index of the initial pose the winning run started from
   int scan_turns = 0;                 // runs the shape scan (explore_tolerance) turned to another rotation
   int iterations = 0;                 // iterations actually run (early stop)

@@ -351,7 +351,18 @@ RefineResult RefineRun::finish(Renderer& renderer) {
     std::vector<LossValue> v;  // of the starts that got a run, as at k = 0
     const std::vector<Pose> started(initials_.begin(), initials_.begin() + std::min(starts, B));
     renderer.evaluate(cam, mesh_, obs, started, loss_, false, v);
-    res.initial_loss = std::min_element(v.begin(), v.end(), [](auto& a, auto& b) { return a.total < b.total; })->total;
+    const size_t j = size_t(std::min_element(v.begin(), v.end(), [](auto& a, auto& b) { return a.total < b.total; }) - v.begin());
+    res.initial_loss = v[j].total;
+    // The start is a pose seen too (at k = 0, at the coarse scale): when no run's fine-phase best beats it (a
+    // start that was already right: a track), it is the result, from the run that started there.
+    if (v[j].total < res.loss.total) {
+      res.winner = int(j);
+      res.start = int(j);
+      res.pose = res.initial_pose = initials_[j];
+      res.loss = v[j];
+      res.run_losses[j] = v[j].total;
+      res.history = res.run_histories[j];
+    }
   }
   // Quality scores at the refined pose.
   const RenderImage img = renderer.render(cam, mesh_, {res.pose}, obs.mask)[0];

@@ -181,6 +181,23 @@ TEST(Refiner, EasyStartsDoNotGetWorse) {
   }
 }
 
+TEST(Refiner, TheResultIsNeverWorseThanTheStartAtTheFineScale) {
+  // Started at the loss's own optimum with only large learning rates, coarse to fine: every run's fine-phase
+  // best is worse than the start, which is then the result (the start is a pose seen, at k = 0).
+  const Scene s = make_scene(6);
+  RefinerOptions o = test_options();
+  o.iterations = 20;
+  o.lr_low = o.lr_high = 0.05;
+  o.coarse_fraction = 0.5;
+  o.coarse_scale = 0.5;
+  Refiner refiner(o);
+  const RefineResult once = refiner.refine(s.cam, s.obs, s.mesh, s.truth);
+  const RefineResult again = refiner.refine(s.cam, s.obs, s.mesh, once.pose);  // (the start is now at the optimum)
+  EXPECT_LE(again.loss.total, again.initial_loss);
+  for (double l : again.run_losses) EXPECT_GE(l, again.loss.total);
+  if (again.loss.total == again.initial_loss) EXPECT_TRUE(again.pose.matrix().isApprox(once.pose.matrix()));
+}
+
 TEST(Refiner, SameSeedSameResultOtherSeedOtherRates) {
   const Scene s = make_scene(4);
   std::mt19937_64 rng(4);

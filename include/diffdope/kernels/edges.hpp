@@ -18,15 +18,21 @@ DD_HOST_DEVICE float grey_at(const float* grey, int W, int H, int x, int y) {
   return (x < 0 || y < 0 || x >= W || y >= H) ? 0.f : grey[y * W + x];
 }
 
-/// Edge value at (x, y); also returns the Sobel responses (needed by the backward pass).
-DD_HOST_DEVICE float edge_value(const float* grey, int W, int H, int x, int y, float scale, float* gx, float* gy) {
-  float sx = 0.f, sy = 0.f;
+/// Sobel x and y responses at (x, y) of a W x H image (0 outside).
+DD_HOST_DEVICE void sobel_at(const float* image, int W, int H, int x, int y, float* sx, float* sy) {
+  *sx = *sy = 0.f;
   for (int dy = -1; dy <= 1; ++dy)
     for (int dx = -1; dx <= 1; ++dx) {
-      const float g = grey_at(grey, W, H, x + dx, y + dy);
-      sx += sobel_x(dx, dy) * g;
-      sy += sobel_y(dx, dy) * g;
+      const float g = grey_at(image, W, H, x + dx, y + dy);
+      *sx += sobel_x(dx, dy) * g;
+      *sy += sobel_y(dx, dy) * g;
     }
+}
+
+/// Edge value at (x, y); also returns the Sobel responses (needed by the backward pass).
+DD_HOST_DEVICE float edge_value(const float* grey, int W, int H, int x, int y, float scale, float* gx, float* gy) {
+  float sx, sy;
+  sobel_at(grey, W, H, x, y, &sx, &sy);
   *gx = sx;
   *gy = sy;
   const float mag = sqrtf(sx * sx + sy * sy);
@@ -67,13 +73,8 @@ DD_HOST_DEVICE float texture_term_step(const float* log_grey, float w, int W, in
                                        const float observed[2], float k, float* g_tx, float* g_ty) {
   if (g_tx) *g_tx = *g_ty = 0.f;
   if (!(w > 0.f)) return 0.f;
-  float sx = 0.f, sy = 0.f;
-  for (int dy = -1; dy <= 1; ++dy)
-    for (int dx = -1; dx <= 1; ++dx) {
-      const float g = grey_at(log_grey, W, H, x + dx, y + dy);
-      sx += sobel_x(dx, dy) * g;
-      sy += sobel_y(dx, dy) * g;
-    }
+  float sx, sy;
+  sobel_at(log_grey, W, H, x, y, &sx, &sy);
   if (g_tx) {
     *g_tx = k * w * signf(sx - observed[0]);
     *g_ty = k * w * signf(sy - observed[1]);
