@@ -16,6 +16,8 @@ class RefineRun {
   /// std::invalid_argument on unusable input (as Refiner::refine()). `scaled_frame` (refine_all): the frame's
   /// rgb / depth / edges already at the refiner's scale, shared by the objects; then only the mask is resized.
   /// `coarse_frame` likewise at image_scale * coarse_scale (see RefinerOptions::coarse_fraction).
+  /// `shape_turns`: the model-frame turns the shape scan tries on every run (RefinerOptions::explore_tolerance;
+  /// empty: no scan).
   RefineRun(const RefinerOptions& options, const Camera& camera, const Observation& observed, const Mesh& mesh,
             const std::vector<Pose>& initials, std::vector<Pose> shape_turns = {},
             const Observation* scaled_frame = nullptr, const Observation* coarse_frame = nullptr);
