@@ -58,6 +58,14 @@ int coarse_iterations(const RefinerOptions& o) {
   return std::min(int(std::floor(o.coarse_fraction * o.iterations)), o.iterations - 1);
 }
 
+/// The iteration whose batch is preceded by the shape scan (RefinerOptions::explore_tolerance): when the fine
+/// phase begins (without a coarse phase: half-way), never on the last iteration; -1 = none.
+int scan_iteration(const RefinerOptions& o) {
+  if (!(o.explore_tolerance > 0)) return -1;
+  const int switch_at = coarse_iterations(o);
+  return switch_at > 0 ? switch_at : (o.iterations >= 2 ? o.iterations / 2 : -1);
+}
+
 /// Halvings due by iteration k of `iters`: at 25 %, 50 % and 75 % (">=": a stalled coarse phase may jump over
 /// them).
 int halvings_due(int k, int iters) {
@@ -212,8 +220,7 @@ RefineRun::RefineRun(const RefinerOptions& o, const Camera& camera, const Observ
   scan_loss_.weight_texture += o.explore_texture_weight;
   switch_at_ = coarse_iterations(o);
   if (switch_at_ > 0) coarse_ = make_level(o.image_scale * o.coarse_scale, coarse_frame);
-  // The scan comes when the fine phase begins (without a coarse phase: half-way), never on the last iteration.
-  if (!turns_.empty()) scan_at_ = switch_at_ > 0 ? switch_at_ : (o.iterations >= 2 ? o.iterations / 2 : -1);
+  if (!turns_.empty()) scan_at_ = scan_iteration(o);
 
   const int B = o.batch_size;
   std::mt19937_64 rng(o.seed);
@@ -495,9 +502,7 @@ namespace diffdope {
 long planned_evaluations(const RefinerOptions& o) {
   long total = 0;
   int active = std::max(o.batch_size, 1), halvings = 0;
-  // The shape scan, as RefineRun plans it, with as many turns as any shape gets.
-  const int switch_at = coarse_iterations(o);
-  const int scan_at = !(o.explore_tolerance > 0) ? -1 : switch_at > 0 ? switch_at : (o.iterations >= 2 ? o.iterations / 2 : -1);
+  const int scan_at = scan_iteration(o);  // with as many turns as any shape gets
   for (int k = 0; k <= o.iterations; ++k) {  // as RefineRun::batch(): k == iterations only evaluates
     for (const int due = halvings_due(k, o.iterations); o.successive_halving && k < o.iterations && halvings < due;
          ++halvings)
