@@ -47,7 +47,7 @@ class BopDataset {
   /// RGB, depth (metres) and the visible mask of one instance.
   Observation observation(const BopImage& img, int inst) const;
   bool has_model(int obj_id) const;
-  /// The model in metres (loaded once, cached).
+  /// The model in metres (loaded once, cached), with the symmetries models_info.json declares.
   const Mesh& model(int obj_id);
   /// True when models_info.json lists symmetries (discrete or continuous): score with ADD-S.
   bool symmetric(int obj_id) const;
@@ -55,6 +55,7 @@ class BopDataset {
  private:
   std::string root_, split_;
   std::map<int, bool> symmetric_;
+  std::map<int, ObjectSymmetry> symmetries_;  // declared in models_info.json; given to model()'s meshes
   std::map<int, std::unique_ptr<Mesh>> models_;
 };
 

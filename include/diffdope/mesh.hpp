@@ -8,6 +8,7 @@
 
 #include "diffdope/kernels/mesh_view.hpp"
 #include "diffdope/pose.hpp"
+#include "diffdope/symmetry.hpp"
 
 namespace diffdope {
 
@@ -73,6 +74,9 @@ class Mesh {
   std::vector<int> tri_texture;  // per triangle: index into textures, or -1 for vertex colours
   std::vector<Texture> textures;
   std::string name;              // file name or generator name, for messages
+  /// Declared by the caller (objects config, BOP models_info.json); load() leaves it empty. The refiner does not
+  /// search along it and reports poses in a canonical form (symmetry.hpp).
+  ObjectSymmetry symmetry;
 
   /// Loads PLY (incl. `comment TextureFile`), OBJ+MTL, glTF/GLB and whatever else assimp reads.
   /// Throws std::runtime_error naming the file and the problem (missing file, missing texture, no triangles).

@@ -8,6 +8,9 @@
 //       mesh: package://my_pkg/meshes/cracker.ply   # or an absolute path, file://, or relative to this file
 //       mesh_scale: 0.01                    # metres per mesh unit (default 1)
 //       symmetric: false                    # scored with ADD-S when true (evaluation only)
+//       symmetries:                         # declared symmetries (symmetry.hpp; mesh frame, metres): the refiner
+//         continuous: [{axis: [0, 0, 1], offset: [0, 0, 0]}]  # does not search along them, the poses it
+//         discrete: [{translation: [0, 0, 0], rotation: [1, 0, 0, 0]}]  # reports do not spin or flip
 //       mask_label: 3                       # label-image value of this object; -1 (default): any nonzero pixel
 //       pose_topic: /dope/pose_cracker      # detector PoseStamped topic (default /dope/pose_<name>)
 //       model_transform:                    # pose of the mesh in the object frame the detector reports
@@ -27,7 +30,8 @@ struct ObjectConfig {
   std::string mesh;        // as written in the file (package://, file://, absolute or relative path)
   std::string mesh_path;   // resolved absolute file path
   double mesh_scale = 1.0; // metres per mesh unit
-  bool symmetric = false;
+  bool symmetric = false;  // scored with ADD-S (true whenever symmetries are declared)
+  ObjectSymmetry symmetries;  // mesh frame, metres; load_object_mesh() gives them to the mesh
   int mask_label = -1;     // -1: any nonzero mask pixel belongs to the object
   std::string pose_topic;  // empty: the node's default (/dope/pose_<name>)
   Pose model_transform;    // mesh frame -> object (detector) frame; identity by default
@@ -54,7 +58,8 @@ ObjectsConfig parse_objects_config(const std::string& yaml, const std::string& o
 std::string resolve_mesh_path(const std::string& mesh, const std::string& base_dir,
                               const PackageResolver& resolve_package);
 
-/// Loads the object's mesh (scaled to metres, model_transform not applied). Throws std::runtime_error.
+/// Loads the object's mesh (scaled to metres, model_transform not applied, the declared symmetries attached).
+/// Throws std::runtime_error.
 Mesh load_object_mesh(const ObjectConfig& object);
 
 }  // namespace diffdope

@@ -7,6 +7,7 @@
 #include <vector>
 
 #include "diffdope/pose.hpp"
+#include "diffdope/symmetry.hpp"
 
 namespace diffdope {
 
@@ -62,6 +63,11 @@ class ObjectTrack {
 
   /// The outcome of refining the frame stamped `image_stamp`. Returns true when this loses the track.
   bool report(const Pose& refined, bool plausible, double image_stamp);
+
+  /// The pose to report for `refined` (call before report()), of an object with declared `symmetry`: of its
+  /// equivalent poses, the one nearest the track's last pose, so a tracked symmetric object does not spin or flip
+  /// between frames even when a fresh detection does; without a track, the canonical one (symmetry.hpp).
+  Pose reported_pose(const Pose& refined, const ObjectSymmetry& symmetry) const;
 
   bool tracking() const { return track_.has_value(); }
   /// Whether the track can still seed a frame stamped `now` (not timed out).

@@ -12,6 +12,7 @@
 #include "diffdope/mesh.hpp"
 #include "diffdope/observation.hpp"
 #include "diffdope/pose.hpp"
+#include "diffdope/pose_curvature.hpp"
 #include "diffdope/renderer.hpp"
 #include "diffdope/shape_rotations.hpp"
 
@@ -75,6 +76,10 @@ struct RefinerOptions {
   /// fraction >= min_depth_inliers (if depth was given).
   double min_mask_iou = 0.5;       // [0, 1]
   double min_depth_inliers = 0.5;  // [0, 1]
+  /// The loss is probed around the result at this mean displacement of the model surface (metres, the unit of
+  /// ADD): RefineResult::curvature, the loss's curvature and its least constrained direction (pose_curvature.hpp;
+  /// 15 evaluations, ~1 % of a default refinement). 0 = no probe.
+  double probe_distance = 0.01;  // [0, 1]
   RenderOptions render;  // back-face culling, near plane, threads
   /// Backend: cpu, cuda (an error without a device) or auto (CUDA when a device is present, else the CPU with
   /// one line on stderr). Default cpu: the CUDA backend shares the CPU's maths but has not yet been run on a
@@ -105,6 +110,7 @@ struct RefineResult {
   double initial_loss = 0;            // loss of the initial pose (at image_scale)
   std::vector<double> run_losses;     // best loss of every run (at image_scale; +inf for runs dropped in the coarse phase)
   std::vector<double> learning_rates; // every run's drawn rate
+  std::vector<Pose> run_poses;        // every run's best pose (its start for runs dropped in the coarse phase)
   std::vector<double> history;        // winner's loss at every iteration (the coarse phase's at its own scale)
   std::vector<std::vector<double>> run_histories;  // every run's loss at every iteration it ran
   int winner = -1;                    // the run whose best pose is the result (its start's run when no run's
@@ -119,6 +125,8 @@ struct RefineResult {
                                       // reading within inlier_threshold of the render; -1 without depth
   bool converged = false;             // the winner's loss stopped improving (relative change < 1 % over the last 10 %)
   bool plausible = false;             // scores pass the thresholds in RefinerOptions
+  PoseCurvature curvature;            // the loss around the refined pose (valid = false when not probed:
+                                      // probe_distance = 0, or a probe left the image)
   std::string error;                  // refine_all(): why this object could not be refined (empty = refined)
 };
 

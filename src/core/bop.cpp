@@ -60,6 +60,50 @@ cv::Mat imread_checked(const std::string& path, int flags) {
   return m;
 }
 
+/// A numeric array of `n` finite numbers at j[key] (or j itself when key is empty).
+std::vector<double> numbers(const json& j, size_t n, const std::string& where) {
+  if (!j.is_array() || j.size() != n) throw std::runtime_error(where + ": expected " + std::to_string(n) + " numbers");
+  std::vector<double> out;
+  for (const json& x : j) {
+    if (!x.is_number() || !std::isfinite(x.get<double>())) throw std::runtime_error(where + ": not a finite number");
+    out.push_back(x.get<double>());
+  }
+  return out;
+}
+
+/// BOP's declared symmetries of one models_info.json entry (lengths in mm).
+ObjectSymmetry parse_bop_symmetry(const json& v, const std::string& where) {
+  ObjectSymmetry sym;
+  constexpr double kMetresPerMm = 1e-3;
+  const auto list = [&](const char* key) {
+    const json& l = v.contains(key) ? v[key] : json::array();
+    if (!l.is_array()) throw std::runtime_error(where + ": " + key + " is not a list");
+    return l;
+  };
+  const json cont = list("symmetries_continuous"), disc = list("symmetries_discrete");
+  for (size_t i = 0; i < cont.size(); ++i) {
+    const std::string w = where + ": symmetries_continuous[" + std::to_string(i) + "]";
+    if (!cont[i].is_object() || !cont[i].contains("axis")) throw std::runtime_error(w + ": expected {axis, offset}");
+    const std::vector<double> a = numbers(cont[i]["axis"], 3, w + ".axis");
+    const std::vector<double> o = cont[i].contains("offset") ? numbers(cont[i]["offset"], 3, w + ".offset")
+                                                             : std::vector<double>{0, 0, 0};
+    sym.continuous.push_back({Eigen::Vector3d(a[0], a[1], a[2]), kMetresPerMm * Eigen::Vector3d(o[0], o[1], o[2])});
+  }
+  for (size_t i = 0; i < disc.size(); ++i) {
+    const std::vector<double> m = numbers(disc[i], 16, where + ": symmetries_discrete[" + std::to_string(i) + "]");
+    Eigen::Matrix4d T;
+    for (int k = 0; k < 16; ++k) T(k / 4, k % 4) = m[k];
+    T.topRightCorner<3, 1>() *= kMetresPerMm;
+    sym.discrete.push_back(Pose(T.topLeftCorner<3, 3>(), T.topRightCorner<3, 1>()));
+  }
+  try {
+    sym.validate_and_normalise(where);
+  } catch (const std::invalid_argument& e) {
+    throw std::runtime_error(e.what());
+  }
+  return sym;
+}
+
 }  // namespace
 
 BopDataset::BopDataset(const std::string& root, const std::string& split, const std::set<int>* symmetric_ids)
@@ -88,6 +132,7 @@ BopDataset::BopDataset(const std::string& root, const std::string& split, const 
     if (used != key.size() || id < 0) throw std::runtime_error(info + ": key '" + key + "' is not an object id");
     if (!v.is_object()) throw std::runtime_error(info + ": object " + key + " is not an object");
     symmetric_[id] = v.contains("symmetries_discrete") || v.contains("symmetries_continuous");
+    symmetries_[id] = parse_bop_symmetry(v, info + ": object " + key);
   }
 }
 
@@ -171,6 +216,7 @@ const Mesh& BopDataset::model(int obj_id) {
   MeshLoadOptions opt;
   opt.scale = 0.001;
   auto mesh = std::make_unique<Mesh>(Mesh::load(root_ + "/models/" + name, opt));
+  if (auto s = symmetries_.find(obj_id); s != symmetries_.end()) mesh->symmetry = s->second;
   return *(models_[obj_id] = std::move(mesh));
 }
 

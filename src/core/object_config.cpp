@@ -52,6 +52,43 @@ Pose read_transform(const YAML::Node& n, const std::string& where) {
   return p;
 }
 
+/// symmetries: {continuous: [{axis: [x, y, z], offset: [x, y, z]}], discrete: [{translation, rotation}]}.
+ObjectSymmetry read_symmetries(const YAML::Node& n, const std::string& where) {
+  if (!n.IsMap()) throw std::runtime_error(where + ": expected continuous and/or discrete");
+  ObjectSymmetry sym;
+  for (const auto& kv : n) {
+    const std::string key = kv.first.as<std::string>();
+    if (!kv.second.IsSequence()) throw std::runtime_error(where + "." + key + ": expected a list");
+    if (key == "continuous") {
+      for (size_t i = 0; i < kv.second.size(); ++i) {
+        const YAML::Node a = kv.second[i];
+        const std::string w = where + ".continuous[" + std::to_string(i) + "]";
+        if (!a.IsMap() || !a["axis"]) throw std::runtime_error(w + ": expected {axis, offset}");
+        ObjectSymmetry::Axis axis;
+        for (const auto& f : a) {
+          const std::string k = f.first.as<std::string>();
+          const std::vector<double> v = read_vector(f.second, 3, w + "." + k);
+          if (k == "axis") axis.direction = Eigen::Vector3d(v[0], v[1], v[2]);
+          else if (k == "offset") axis.offset = Eigen::Vector3d(v[0], v[1], v[2]);
+          else throw std::runtime_error(w + ": unknown key '" + k + "' (axis, offset)");
+        }
+        sym.continuous.push_back(axis);
+      }
+    } else if (key == "discrete") {
+      for (size_t i = 0; i < kv.second.size(); ++i)
+        sym.discrete.push_back(read_transform(kv.second[i], where + ".discrete[" + std::to_string(i) + "]"));
+    } else {
+      throw std::runtime_error(where + ": unknown key '" + key + "' (continuous, discrete)");
+    }
+  }
+  try {
+    sym.validate_and_normalise(where);
+  } catch (const std::invalid_argument& e) {
+    throw std::runtime_error(e.what());
+  }
+  return sym;
+}
+
 }  // namespace
 
 std::string resolve_mesh_path(const std::string& mesh, const std::string& base_dir,
@@ -113,9 +150,11 @@ ObjectsConfig parse_objects_config(const std::string& yaml, const std::string& o
         else if (key == "mask_label") o.mask_label = kv.second.as<int>();
         else if (key == "pose_topic") o.pose_topic = kv.second.as<std::string>();
         else if (key == "model_transform") o.model_transform = read_transform(kv.second, where + ".model_transform");
+        else if (key == "symmetries") o.symmetries = read_symmetries(kv.second, where + ".symmetries");
         else
           throw std::runtime_error(where + ": unknown key '" + key +
-                                   "' (name, mesh, mesh_scale, symmetric, mask_label, pose_topic, model_transform)");
+                                   "' (name, mesh, mesh_scale, symmetric, symmetries, mask_label, pose_topic, "
+                                   "model_transform)");
       }
     } catch (const YAML::Exception& e) {
       throw std::runtime_error(where + ": " + e.what());
@@ -134,6 +173,7 @@ ObjectsConfig parse_objects_config(const std::string& yaml, const std::string& o
     } catch (const std::exception& e) {  // name the file and the object, not only the URL
       throw std::runtime_error(where + ": 'mesh' " + e.what());
     }
+    if (!o.symmetries.empty()) o.symmetric = true;  // declared symmetries are scored with ADD-S too
     cfg.objects.push_back(o);
   }
   return cfg;
@@ -152,7 +192,9 @@ ObjectsConfig load_objects_config(const std::string& path, const PackageResolver
 Mesh load_object_mesh(const ObjectConfig& object) {
   MeshLoadOptions mo;
   mo.scale = object.mesh_scale;
-  return Mesh::load(object.mesh_path, mo);
+  Mesh mesh = Mesh::load(object.mesh_path, mo);
+  mesh.symmetry = object.symmetries;
+  return mesh;
 }
 
 }  // namespace diffdope

@@ -82,6 +82,10 @@ std::optional<Seed> ObjectTrack::predict(double image_stamp) const {
   return p;
 }
 
+Pose ObjectTrack::reported_pose(const Pose& refined, const ObjectSymmetry& symmetry) const {
+  return symmetry.nearest_equivalent(refined, track_ ? track_->pose.R : ObjectSymmetry::canonical_reference());
+}
+
 bool ObjectTrack::report(const Pose& refined, bool plausible, double image_stamp) {
   if (plausible) {
     failures_ = 0;

@@ -130,8 +130,11 @@ std::vector<Pose> Refiner::shape_turns(const Mesh& mesh, bool explore) {
     cached = shape_rotations_.emplace(mesh.content_id(), analyse_shape_rotations(mesh)).first;
   }
   std::vector<Pose> turns;
+  // A declared symmetry's turns look the same by design: no loss can choose among them.
+  const double radius = 0.5 * mesh.diameter(), angle_tol = 0.1;  // (30-degree steps: 0.1 rad tells them apart)
   for (const ShapeRotation& r : ambiguous_rotations(cached->second, options_.explore_tolerance, kMaxShapeTurns))
-    turns.push_back(r.as_pose());
+    if (!mesh.symmetry.contains(r.as_pose(), angle_tol, options_.explore_tolerance * mesh.diameter(), radius))
+      turns.push_back(r.as_pose());
   return turns;
 }
 
@@ -345,6 +348,7 @@ RefineResult RefineRun::finish(Renderer& renderer) {
   RefineResult res = std::move(res_);
   res.run_losses.resize(B);
   for (int i = 0; i < B; ++i) res.run_losses[i] = best_[i].total;
+  res.run_poses = best_pose_;
   res.winner = int(std::min_element(res.run_losses.begin(), res.run_losses.end()) - res.run_losses.begin());
   res.pose = best_pose_[res.winner];
   res.start = res.winner % starts;
@@ -371,6 +375,8 @@ RefineResult RefineRun::finish(Renderer& renderer) {
       res.history = res.run_histories[j];
     }
   }
+  // Of the poses a declared symmetry makes equivalent, the one nearest the start: a track does not spin.
+  res.pose = mesh_.symmetry.nearest_equivalent(res.pose, res.initial_pose.R);
   // Quality scores at the refined pose.
   const RenderImage img = renderer.render(cam, mesh_, {res.pose}, obs.mask)[0];
   const cv::Mat rendered = img.coverage >= 0.5f;
@@ -388,6 +394,9 @@ RefineResult RefineRun::finish(Renderer& renderer) {
     const cv::Mat inlier = object & (img.depth > 0) & (diff < o.inlier_threshold);
     res.depth_inliers = n > 0 ? double(cv::countNonZero(inlier)) / n : 0.0;
   }
+  if (o.probe_distance > 0 && std::isfinite(res.loss.total))
+    res.curvature = probe_pose_curvature(renderer, cam, mesh_, obs, loss_, res.pose, o.probe_distance,
+                                         mesh_.symmetry.free_twists(res.pose, res.pose * mesh_.center()));
   const size_t n = res.history.size(), tail = std::max<size_t>(2, n / 10);
   if (n >= tail) {
     const double a = res.history[n - tail], b = res.history.back();
@@ -510,7 +519,8 @@ long planned_evaluations(const RefinerOptions& o) {
     total += active;
     if (k == scan_at && k < o.iterations) total += long(active) * (1 + kMaxShapeTurns);
   }
-  return total + 2;  // finish(): the initial loss at the fine scale and the scoring render
+  // finish(): the initial loss at the fine scale, the scoring render and the curvature probe.
+  return total + 2 + (o.probe_distance > 0 ? kCurvatureProbeEvaluations : 0);
 }
 
 }  // namespace diffdope

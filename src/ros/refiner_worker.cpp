@@ -346,13 +346,14 @@ std::vector<diffdope_ros::RefinedPose> RefinerNodelet::refineAndPublish(
       continue;
     }
     const diffdope::Seed& seed = starts[std::min<size_t>(size_t(r.start), starts.size() - 1)];
-    if (s.track.report(r.pose, r.plausible, frame.header.stamp.toSec())) reportLostTrack(s);
+    const diffdope::Pose refined = s.track.reported_pose(r.pose, s.mesh->symmetry);  // no spin / flip (symmetry)
+    if (s.track.report(refined, r.plausible, frame.header.stamp.toSec())) reportLostTrack(s);
     implausible += !r.plausible;
     const diffdope::Pose inv_model = s.config.model_transform.inverse();
     diffdope_ros::RefinedPose p;
     p.name = s.config.name;
     p.pose.header = frame.header;
-    p.pose.pose = pose_to_msg(r.pose * inv_model);
+    p.pose.pose = pose_to_msg(refined * inv_model);
     p.initial_pose = pose_to_msg(seed.pose * inv_model);
     p.source = diffdope::to_string(seed.source);
     p.mask_iou = r.mask_iou;
@@ -371,7 +372,7 @@ std::vector<diffdope_ros::RefinedPose> RefinerNodelet::refineAndPublish(
     geometry_msgs::TransformStamped t;
     t.header = frame.header;
     t.child_frame_id = frame_prefix_ + s.config.name;
-    t.transform = transform_to_msg(r.pose * inv_model);
+    t.transform = transform_to_msg(refined * inv_model);
     transforms.push_back(t);
   }
   if (publish_tf_ && !transforms.empty()) tf_broadcaster_->sendTransform(transforms);

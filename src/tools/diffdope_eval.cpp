@@ -210,6 +210,10 @@ int main(int argc, char** argv) {
                                  {"error_mm", 1e3 * e1}, {"metric", sym ? "ADD-S" : "ADD"},
                                  {"mask_iou", r.mask_iou}, {"plausible", r.plausible},
                                  {"winner_lr", r.learning_rates[r.winner]}};
+          line["depth_inliers"] = r.depth_inliers;
+          line["loss_terms"] = {{"rgb", r.loss.rgb}, {"depth", r.loss.depth}, {"mask", r.loss.mask}};
+          line["scan_turns"] = r.scan_turns;
+          if (r.curvature.valid) line["weakest_rise"] = r.curvature.weakest_rise;  // (pose_curvature.hpp)
           out << line.dump() << "\n";
           out.flush();
           std::fprintf(stderr, "\r%s scene %d sample %d: %.1f -> %.1f mm (%.0f ms)    ", level.c_str(), scene,

@@ -1,6 +1,9 @@
 // ObjectTrack (object_track.hpp): which initial pose seeds an object's refinement on each frame.
 #include <gtest/gtest.h>
 
+#include <Eigen/Geometry>
+#include <cmath>
+
 #include <optional>
 
 #include "diffdope/object_track.hpp"
@@ -312,4 +315,29 @@ TEST(ObjectTrack, PredictsAtConstantVelocityAboutThePivot) {
   off.report(pose_at(0), true, 10.0);
   off.report(pose_at(1), true, 10.1);
   EXPECT_FALSE(off.predict(10.2).has_value());
+}
+
+TEST(ObjectTrack, ASymmetricObjectIsReportedWithoutSpinOrFlip) {
+  // A can (symmetric about its z axis) whose detector reports it turned arbitrarily about the axis: without a
+  // track the reported pose is the canonical one, then every frame the one nearest the track.
+  ObjectSymmetry can;
+  can.continuous.push_back({Eigen::Vector3d::UnitZ(), Eigen::Vector3d::Zero()});
+  const auto about_z = [](double deg) {
+    return Pose(Eigen::AngleAxisd(deg * M_PI / 180, Eigen::Vector3d::UnitZ()).toRotationMatrix(), Eigen::Vector3d::Zero());
+  };
+  const Pose base(Eigen::AngleAxisd(1.0, Eigen::Vector3d(1, 0.3, 0).normalized()).toRotationMatrix(),
+                  Eigen::Vector3d(0, 0, 0.6));
+  ObjectTrack track;
+  const Pose first = track.reported_pose(base * about_z(77), can);
+  EXPECT_LT(rotation_angle(first.R, track.reported_pose(base * about_z(-150), can).R), 1e-6);  // canonical
+  track.report(first, true, 1.0);
+  for (int k = 1; k <= 5; ++k) {
+    // The object turns 2 degrees a frame about another axis; the detector's turn about z jumps around.
+    const Pose moved = Pose(Eigen::AngleAxisd(k * 2 * M_PI / 180, Eigen::Vector3d::UnitX()).toRotationMatrix(),
+                            Eigen::Vector3d::Zero()) * base;
+    const Pose reported = track.reported_pose(moved * about_z(k * 97), can);
+    EXPECT_LT(rotation_angle(reported.R, track.reported_pose(moved, can).R), 1e-6);
+    EXPECT_LT(rotation_angle(reported.R, first.R) * 180 / M_PI, 2.0 * k + 0.5) << k;  // no spin
+    track.report(reported, true, 1.0 + k);
+  }
 }

@@ -15,11 +15,14 @@ TEST(PlannedEvaluations, RunsTimesIterationsLessWhatHalvingDrops) {
   o.iterations = 100;
   o.explore_tolerance = 0;  // no shape scan
   o.successive_halving = false;
+  o.probe_distance = 0;  // no curvature probe
   EXPECT_EQ(planned_evaluations(o), 16 * 101 + 2);
   o.successive_halving = true;  // 25 iterations each at 16, 8, 4, 2 runs, then the last evaluation at 2
   EXPECT_EQ(planned_evaluations(o), 16 * 25 + 8 * 25 + 4 * 25 + 2 * 25 + 2 + 2);
   o.iterations = 0;
   EXPECT_EQ(planned_evaluations(o), 16 + 2);
+  o.probe_distance = 0.01;
+  EXPECT_EQ(planned_evaluations(o), 16 + 2 + kCurvatureProbeEvaluations);
 }
 
 TEST(RefineTimeEstimator, UsesThePriorUntilARefinementWasTimed) {

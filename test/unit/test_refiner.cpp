@@ -117,9 +117,10 @@ TEST(Refiner, SuccessiveHalvingDropsTheWorseHalfThreeTimes) {
   EXPECT_EQ(runs_by_length, (std::map<size_t, int>{{5, 8}, {10, 4}, {15, 2}, {21, 2}}));
   EXPECT_EQ(r.run_histories[r.winner].size(), 21u);
   for (double loss : r.run_losses) EXPECT_GE(loss, r.loss.total);
-  // planned_evaluations() (the service's time estimate) counts what the refinement evaluated, + 2 for scoring.
+  // planned_evaluations() (the service's time estimate) counts what the refinement evaluated, + 2 for scoring
+  // and the curvature probe's.
   auto evaluated = [](const RefineResult& res) {
-    long n = 0;
+    long n = kCurvatureProbeEvaluations;
     for (const auto& h : res.run_histories) n += long(h.size());
     return n;
   };

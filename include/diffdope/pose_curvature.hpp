@@ -1,0 +1,61 @@
+#pragma once
+// How firmly an observation pins a refined pose down: the loss's curvature at that pose, measured per metre of
+// the model surface's mean displacement (the unit of ADD, what a grasp tolerates). A direction the data do not
+// constrain (a bottle's axis with its print unseen, a mug whose handle is hidden) shows as a small curvature and
+// a small loss rise along it; the refiner's verdict and the pose covariance are built on it.
+#include <Eigen/Core>
+#include <vector>
+
+#include "diffdope/camera.hpp"
+#include "diffdope/mesh.hpp"
+#include "diffdope/observation.hpp"
+#include "diffdope/pose.hpp"
+#include "diffdope/renderer.hpp"
+
+namespace diffdope {
+
+using Matrix6d = Eigen::Matrix<double, 6, 6>;
+
+/// The pose moved by the twist δ = (v [m], w [rad], camera axes) about `pivot` (camera frame):
+/// R' = exp(w) R, t' = exp(w) (t − pivot) + pivot + v.
+Pose twist_about(const Pose& pose, const Vector6d& delta, const Eigen::Vector3d& pivot);
+
+/// The renderer's gradient (w.r.t. T' = exp(δ)·T about the camera origin, renderer.hpp) as the gradient w.r.t.
+/// the twist about `pivot` of twist_about().
+Vector6d gradient_about(const Vector6d& camera_gradient, const Eigen::Vector3d& pivot);
+
+/// G with δᵀ G δ = the mean squared displacement of the model's surface (area-weighted) under the twist δ about
+/// the model point `pivot_model`, for a pose of rotation `R` (camera axes). Symmetric positive definite for any
+/// mesh with area that is not a line.
+Matrix6d surface_displacement_metric(const Mesh& mesh, const Eigen::Matrix3d& R, const Eigen::Vector3d& pivot_model);
+
+/// Evaluations of one probe: a batch of 13 with gradients (±half the distance along the 6 metric axes, and the
+/// pose), and one of 2 without (±the distance along the weakest direction).
+constexpr int kCurvatureProbeEvaluations = 15;
+
+/// The loss around a pose, probed with kCurvatureProbeEvaluations evaluations.
+struct PoseCurvature {
+  /// Secant Hessian of the loss w.r.t. the twist about the pose's pivot (per m², per m·rad, per rad²):
+  /// central differences of the gradient at ±step of surface displacement along each axis of the metric.
+  Matrix6d hessian = Matrix6d::Zero();
+  Matrix6d metric = Matrix6d::Identity();  // surface_displacement_metric() at the pose
+  /// Eigenvalues of the Hessian in surface-displacement units, ascending: loss per (metre of mean surface
+  /// displacement)², along the directions that are its eigenvectors.
+  Vector6d curvatures = Vector6d::Zero();
+  Vector6d weakest_twist = Vector6d::Zero();  // δ that displaces the surface by 1 m along the least curved direction
+  /// The loss rise measured at ±`distance` of surface displacement along the weakest direction (the smaller of
+  /// the two sides; may be negative when the pose is not at a minimum).
+  double weakest_rise = 0;
+  double loss = 0;  // loss at the pose itself
+  bool valid = false;  // false when a probe left the image (non-finite loss) or the metric is degenerate
+};
+
+/// Probes the loss of `mesh` at `pose` (camera frame) against `observed`, about the pivot pose * mesh.center().
+/// `free_twists`: twists about that pivot along which a declared symmetry makes the object look the same on
+/// purpose (symmetry.hpp); they are projected out before the weakest direction is sought. `distance`: surface displacement (metres) of the rise probe; the
+/// Hessian's differences use half of it.
+PoseCurvature probe_pose_curvature(Renderer& renderer, const Camera& camera, const Mesh& mesh,
+                                   const Observation& observed, const LossOptions& loss, const Pose& pose,
+                                   double distance, const std::vector<Vector6d>& free_twists = {});
+
+}  // namespace diffdope

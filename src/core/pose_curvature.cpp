@@ -1,0 +1,133 @@
+// The loss's curvature at a refined pose, in units of surface displacement (pose_curvature.hpp).
+#include "diffdope/pose_curvature.hpp"
+
+#include <Eigen/Cholesky>
+#include <Eigen/Eigenvalues>
+#include <Eigen/QR>
+#include <cmath>
+#include <limits>
+
+namespace diffdope {
+
+Pose twist_about(const Pose& pose, const Vector6d& delta, const Eigen::Vector3d& pivot) {
+  const Eigen::Matrix3d Rw = so3_exp(delta.tail<3>());
+  Pose out(Rw * pose.R, Rw * (pose.t - pivot) + pivot + delta.head<3>());
+  out.orthonormalize();
+  return out;
+}
+
+Vector6d gradient_about(const Vector6d& g, const Eigen::Vector3d& pivot) {
+  // First order: a twist (v, w) about p is (v + p x w, w) about the camera origin.
+  Vector6d out;
+  out.head<3>() = g.head<3>();
+  out.tail<3>() = g.tail<3>() - pivot.cross(g.head<3>());
+  return out;
+}
+
+namespace {
+
+Eigen::Matrix3d skew(const Eigen::Vector3d& r) {
+  Eigen::Matrix3d S;
+  S << 0, -r.z(), r.y(), r.z(), 0, -r.x(), -r.y(), r.x(), 0;
+  return S;
+}
+
+}  // namespace
+
+Matrix6d surface_displacement_metric(const Mesh& mesh, const Eigen::Matrix3d& R, const Eigen::Vector3d& pivot_model) {
+  // A surface point r (from the pivot) moves by v + w x r = J(r) δ, J = [I, -[r]x]: G = E[Jᵀ J], the area-weighted
+  // mean over the triangles (each at its centroid, plus its own spread: exact second moments per triangle).
+  Eigen::Vector3d first = Eigen::Vector3d::Zero();
+  Eigen::Matrix3d second = Eigen::Matrix3d::Zero();  // E[r rᵀ]
+  double area = 0;
+  const auto at = [&](int i) {
+    const Vec3f& p = mesh.positions[i];
+    return Eigen::Vector3d(p.x, p.y, p.z) - pivot_model;
+  };
+  for (int f = 0; f < mesh.num_triangles(); ++f) {
+    const Eigen::Vector3d a = at(mesh.triangles[3 * f]);
+    const Eigen::Vector3d b = at(mesh.triangles[3 * f + 1]);
+    const Eigen::Vector3d c = at(mesh.triangles[3 * f + 2]);
+    const double A = 0.5 * (b - a).cross(c - a).norm();
+    if (!(A > 0)) continue;
+    const Eigen::Vector3d m = (a + b + c) / 3.0;
+    first += A * m;
+    // Second moment of a uniform triangle: (a aᵀ + b bᵀ + c cᵀ + 9 m mᵀ) / 12.
+    second += A * (a * a.transpose() + b * b.transpose() + c * c.transpose() + 9.0 * m * m.transpose()) / 12.0;
+    area += A;
+  }
+  Matrix6d G = Matrix6d::Identity();
+  if (!(area > 0)) return G;
+  first /= area;
+  second /= area;
+  // E[Jᵀ J] = [[I, -[r̄]x], [[r̄]x, E[|r|²] I - E[r rᵀ]]] (since [r]xᵀ [r]x = |r|² I - r rᵀ).
+  Matrix6d Gm;
+  Gm.topLeftCorner<3, 3>() = Eigen::Matrix3d::Identity();
+  Gm.topRightCorner<3, 3>() = -skew(first);
+  Gm.bottomLeftCorner<3, 3>() = skew(first);
+  Gm.bottomRightCorner<3, 3>() = second.trace() * Eigen::Matrix3d::Identity() - second;
+  Matrix6d B = Matrix6d::Zero();
+  B.topLeftCorner<3, 3>() = R;
+  B.bottomRightCorner<3, 3>() = R;
+  return B * Gm * B.transpose();
+}
+
+PoseCurvature probe_pose_curvature(Renderer& renderer, const Camera& camera, const Mesh& mesh,
+                                   const Observation& observed, const LossOptions& loss, const Pose& pose,
+                                   double distance, const std::vector<Vector6d>& free_twists) {
+  PoseCurvature out;
+  const Eigen::Vector3d pivot = pose * mesh.center();
+  out.metric = surface_displacement_metric(mesh, pose.R, mesh.center());
+  const Eigen::LLT<Matrix6d> llt(out.metric);
+  if (llt.info() != Eigen::Success || !(distance > 0)) return out;
+  const Matrix6d L = llt.matrixL();
+  const Matrix6d Linv = L.inverse();  // whitened q = Lᵀ δ: |q| = RMS surface displacement
+  const Matrix6d LinvT = Linv.transpose();
+  const double h = 0.5 * distance;
+
+  std::vector<Pose> probes;
+  probes.reserve(13);
+  for (int i = 0; i < 6; ++i)
+    for (const double s : {h, -h}) probes.push_back(twist_about(pose, s * LinvT.col(i), pivot));
+  probes.push_back(pose);
+  std::vector<LossValue> v;
+  renderer.evaluate(camera, mesh, observed, probes, loss, true, v);
+  out.loss = v[12].total;
+  for (const LossValue& x : v)
+    if (!std::isfinite(x.total)) return out;
+  Matrix6d Hq;
+  for (int i = 0; i < 6; ++i) {
+    const Vector6d gp = Linv * gradient_about(v[2 * i].gradient, pivot);
+    const Vector6d gm = Linv * gradient_about(v[2 * i + 1].gradient, pivot);
+    Hq.col(i) = (gp - gm) / (2 * h);
+  }
+  Hq = 0.5 * (Hq + Hq.transpose()).eval();
+  out.hessian = L * Hq * L.transpose();
+
+  // The directions a declared symmetry leaves free are not weaknesses of the data: search their complement.
+  Eigen::Matrix<double, 6, Eigen::Dynamic> U = Matrix6d::Identity();
+  if (!free_twists.empty()) {
+    Eigen::Matrix<double, 6, Eigen::Dynamic> F(6, int(free_twists.size()));
+    for (size_t k = 0; k < free_twists.size(); ++k) F.col(int(k)) = L.transpose() * free_twists[k];
+    Eigen::ColPivHouseholderQR<Eigen::Matrix<double, 6, Eigen::Dynamic>> fq(F);
+    const int rank = int(fq.rank());
+    const Matrix6d Q = fq.householderQ();
+    U = Q.rightCols(6 - rank);
+  }
+  const Eigen::MatrixXd Hs = U.transpose() * Hq * U;
+  const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eig(Hs);
+  if (eig.info() != Eigen::Success || Hs.rows() == 0) return out;
+  out.curvatures.setConstant(std::numeric_limits<double>::infinity());
+  for (int i = 0; i < int(Hs.rows()); ++i) out.curvatures[i] = eig.eigenvalues()[i];
+  const Vector6d u = U * eig.eigenvectors().col(0);
+  out.weakest_twist = LinvT * u;
+
+  const std::vector<Pose> sides{twist_about(pose, distance * out.weakest_twist, pivot),
+                                twist_about(pose, -distance * out.weakest_twist, pivot)};
+  renderer.evaluate(camera, mesh, observed, sides, loss, false, v);
+  out.weakest_rise = std::min(v[0].total, v[1].total) - out.loss;
+  out.valid = std::isfinite(out.weakest_rise);
+  return out;
+}
+
+}  // namespace diffdope
