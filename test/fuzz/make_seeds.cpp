@@ -125,6 +125,9 @@ void text_seeds(const std::string& repo) {
   seed("objects_config", "two.yaml",
        "objects:\n  - name: mug\n    mesh: package://diffdope_ros/meshes/mug.ply\n    mesh_scale: 0.001\n"
        "    mask_label: 2\n    symmetric: true\n  - name: box\n    mesh: /tmp/box.obj\nrefiner:\n  batch_size: 8\n");
+  seed("objects_config", "symmetries.yaml",
+       "objects:\n  - name: can\n    mesh: /tmp/can.ply\n    symmetries:\n      continuous: [{axis: [0, 0, 1], "
+       "offset: [0, 0, 0.05]}]\n      discrete: [{translation: [0, 0, 0.1], rotation: [1, 0, 0, 0]}]\n");
   seed("camera_pose", "fxfy_R.txt",
        std::string("{\"fx\": 600, \"fy\": 600, \"cx\": 319.5, \"cy\": 239.5, \"width\": 640, \"height\": 480}") + kSplit +
            "camera_matrix:\n  rows: 3\n  cols: 3\n  data: [600, 0, 320, 0, 600, 240, 0, 0, 1]\nimage_width: 640\n"
@@ -141,7 +144,7 @@ void text_seeds(const std::string& repo) {
        std::string("{\"0\": {\"cam_K\": [8, 0, 3.5, 0, 8, 3.5, 0, 0, 1], \"depth_scale\": 0.1}}") + kSplit +
            "{\"0\": [{\"obj_id\": 1, " + pose + "}, {\"obj_id\": 2, " + pose + "}]}" + kSplit +
            "{\"1\": {\"diameter\": 100}, \"2\": {\"diameter\": 50, \"symmetries_continuous\": [{\"axis\": [0, 0, 1], "
-           "\"offset\": [0, 0, 0]}]}}" + kSplit + "{\"0\": [{\"obj_id\": 1, " + pose + "}], \"1\": [{\"obj_id\": 2, " +
+           "\"offset\": [0, 0, 0]}], \"symmetries_discrete\": [[-1, 0, 0, 0, 0, -1, 0, 0, 0, 0, 1, 5, 0, 0, 0, 1]]}}" + kSplit + "{\"0\": [{\"obj_id\": 1, " + pose + "}], \"1\": [{\"obj_id\": 2, " +
            pose + "}]}");
 }
 
