@@ -40,7 +40,7 @@ Matrix6d surface_displacement_metric(const Mesh& mesh, const Eigen::Matrix3d& R,
   Eigen::Vector3d first = Eigen::Vector3d::Zero();
   Eigen::Matrix3d second = Eigen::Matrix3d::Zero();  // E[r rᵀ]
   double area = 0;
-  const auto at = [&](int i) {
+  const auto at = [&](int i) -> Eigen::Vector3d {  // (a value: an Eigen expression would outlive its operand)
     const Vec3f& p = mesh.positions[i];
     return Eigen::Vector3d(p.x, p.y, p.z) - pivot_model;
   };
