@@ -15,6 +15,7 @@
 #include "diffdope/pose_curvature.hpp"
 #include "diffdope/renderer.hpp"
 #include "diffdope/shape_rotations.hpp"
+#include "diffdope/verdict.hpp"
 
 namespace diffdope {
 
@@ -125,6 +126,7 @@ struct RefineResult {
                                       // reading within inlier_threshold of the render; -1 without depth
   bool converged = false;             // the winner's loss stopped improving (relative change < 1 % over the last 10 %)
   bool plausible = false;             // scores pass the thresholds in RefinerOptions
+  PrintRegistration print;            // whether the print lines up at the refined pose (ncc = -1: not measured)
   PoseCurvature curvature;            // the loss around the refined pose (valid = false when not probed:
                                       // probe_distance = 0, or a probe left the image)
   std::string error;                  // refine_all(): why this object could not be refined (empty = refined)

@@ -394,6 +394,14 @@ RefineResult RefineRun::finish(Renderer& renderer) {
     const cv::Mat inlier = object & (img.depth > 0) & (diff < o.inlier_threshold);
     res.depth_inliers = n > 0 ? double(cv::countNonZero(inlier)) / n : 0.0;
   }
+  if (obs.has_rgb()) {
+    // The object's interior where the observation shows it: 2 px inside the render's full coverage (the
+    // silhouette's gradients fit whenever the shape does) and, with a mask, inside the observed mask.
+    cv::Mat interior = img.coverage >= 0.999f;
+    if (has_mask_) interior &= cv::Mat(obs.mask >= 0.5f);
+    cv::erode(interior, interior, cv::getStructuringElement(cv::MORPH_RECT, cv::Size(5, 5)));
+    res.print = register_print(obs.rgb, img.color, interior, 2, loss_.texture_epsilon);
+  }
   if (o.probe_distance > 0 && std::isfinite(res.loss.total))
     res.curvature = probe_pose_curvature(renderer, cam, mesh_, obs, loss_, res.pose, o.probe_distance,
                                          mesh_.symmetry.free_twists(res.pose, res.pose * mesh_.center()));

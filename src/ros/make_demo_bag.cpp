@@ -2,12 +2,13 @@
 // DOPE-like detections, the objects' meshes and the objects YAML the refiner nodelet reads.
 //
 //   diffdope_make_bag --out DIR [--frames N] [--rate HZ] [--detector-every K] [--detector-latency S]
-//                     [--objects 1|2|3] [--seed S] [--width W] [--height H] [--depth-encoding 16UC1|32FC1]
+//                     [--objects 1|2|3|can] [--seed S] [--width W] [--height H] [--depth-encoding 16UC1|32FC1]
 //                     [--rot-noise-deg D] [--trans-noise-m M] [--compression none|lz4|bz2]
 //
 // DIR/demo.bag, DIR/meshes/<name>.ply (+ <name>.png texture; metres), DIR/objects.yaml (object_config.hpp).
 // Objects: a scan-like bottle alone (--objects 1), or a low-poly printed box, the bottle and a scan-like mug (labels
-// 1, 2, 3 in the mask; scan-like: 15k triangles, UV atlas, 2048^2 print), side by side about 0.6 m in
+// 1, 2, 3 in the mask; scan-like: 15k triangles, UV atlas, 2048^2 print), or a striped can alone (--objects can:
+// symmetric about its axis, declared so in objects.yaml, its detections turned at random about it), side by side about 0.6 m in
 // front of the camera, each turning slowly (~15 deg/s) about its own axis through its centre and drifting (~2 cm/s,
 // a smooth back-and-forth of 3 cm amplitude so long bags stay in view). Frames are composed with
 // synthesize_scene; the background (and the sensor noise pattern) is the same in every frame, as for a static
@@ -68,6 +69,7 @@ struct Args {
   double detector_latency = 0.15;
   int detector_frames = -1;  // detections only on frames k < detector_frames (-1: all): then the detector is silent
   int objects = 3;
+  bool can = false;  // --objects can: one striped can, declared symmetric about its axis
   uint64_t seed = 1;
   int width = 640, height = 480;
   std::string depth_encoding = "16UC1";
@@ -78,7 +80,7 @@ struct Args {
 
 void usage(std::ostream& os) {
   os << "usage: diffdope_make_bag --out DIR [--frames N (40)] [--rate HZ (10)] [--detector-every K (3)]\n"
-        "         [--detector-latency S (0.15)] [--objects 1|2|3 (3)] [--seed S (1)] [--width W (640)]\n"
+        "         [--detector-latency S (0.15)] [--objects 1|2|3|can (3)] [--seed S (1)] [--width W (640)]\n"
         "         [--height H (480)] [--depth-encoding 16UC1|32FC1 (16UC1)] [--rot-noise-deg D (5)]\n"
         "         [--trans-noise-m M (0.01)] [--compression none|lz4|bz2 (lz4)]\n"
         "         [--detector-frames N (all): the detector goes silent from frame N on (tracking)]\n"
@@ -131,6 +133,7 @@ Args parse_args(int argc, char** argv) {
     else if (opt == "--detector-every") a.detector_every = int(parse_int(opt, v, 1, 100000));
     else if (opt == "--detector-frames") a.detector_frames = int(parse_int(opt, v, 0, 100000));
     else if (opt == "--detector-latency") a.detector_latency = parse_double(opt, v, 0.0, 60.0, true);
+    else if (opt == "--objects" && v == "can") a.objects = 1, a.can = true;
     else if (opt == "--objects") a.objects = int(parse_int(opt, v, 1, 3));
     else if (opt == "--seed") a.seed = uint64_t(parse_int(opt, v, 0, std::numeric_limits<long long>::max()));
     else if (opt == "--width") a.width = int(parse_int(opt, v, 32, 8192));
@@ -156,7 +159,27 @@ struct DemoObject {
   Mesh mesh;
   bool symmetric;
   int label;
+  ObjectSymmetry declared;  // written to objects.yaml; the detector reports a random turn about it
 };
+
+/// A can whose print repeats all around (stripes along its height, plain caps): symmetric about its axis, as
+/// the objects config then declares.
+Mesh make_striped_can() {
+  Texture t;
+  t.width = 4;
+  t.height = 256;
+  t.rgb.resize(size_t(3 * t.width * t.height));
+  for (int y = 0; y < t.height; ++y)
+    for (int x = 0; x < t.width; ++x) {
+      // Rows of the lower half are the side (v in [0.02, 0.48]); the upper half the caps (make_cylinder).
+      const bool side = y >= t.height / 2;
+      const int band = (y / 12) % 4;
+      const float c[4][3] = {{0.85f, 0.2f, 0.15f}, {0.95f, 0.9f, 0.8f}, {0.15f, 0.3f, 0.7f}, {0.95f, 0.8f, 0.2f}};
+      for (int ch = 0; ch < 3; ++ch)
+        t.rgb[size_t(3 * (y * t.width + x) + ch)] = side ? c[band][ch] : 0.75f;
+    }
+  return make_cylinder(0.035, 0.12, 96, std::move(t));
+}
 
 /// A slow smooth motion: a fixed-rate turn about `axis` through the mesh centre, and a back-and-forth drift of
 /// the centre along `direction` (speed `drift_speed` at its middle).
@@ -303,7 +326,11 @@ int main(int argc, char** argv) {
     // box. One object: the bottle; more: the box (label 1, at the side), the bottle (2) and the mug (3).
     std::vector<DemoObject> objects;
     const auto bottle = [] { return make_scan_like(ScanShape::Bottle, Eigen::Vector3d(0.065, 0.04, 0.17), 15000, 2048, 11); };
-    if (args.objects == 1) {
+    if (args.can) {
+      ObjectSymmetry about_axis;
+      about_axis.continuous.push_back({Eigen::Vector3d::UnitZ(), Eigen::Vector3d::Zero()});
+      objects.push_back({"can", make_striped_can(), true, 1, about_axis});
+    } else if (args.objects == 1) {
       objects.push_back({"bottle", bottle(), false, 1});
     } else {
       objects.push_back({"box", make_box(Eigen::Vector3d(0.10, 0.05, 0.14), make_label_texture(512, 11)), false, 1});
@@ -322,6 +349,10 @@ int main(int argc, char** argv) {
       yaml << "  - name: " << o.name << "\n    mesh: " << yaml_quote("meshes/" + o.name + ".ply")
            << "\n    mesh_scale: 1\n    symmetric: " << (o.symmetric ? "true" : "false")
            << "\n    mask_label: " << o.label << "\n";
+      for (const ObjectSymmetry::Axis& a : o.declared.continuous)
+        yaml << "    symmetries: {continuous: [{axis: [" << a.direction.x() << ", " << a.direction.y() << ", "
+             << a.direction.z() << "], offset: [" << a.offset.x() << ", " << a.offset.y() << ", " << a.offset.z()
+             << "]}]}\n";
     }
     const std::string yaml_path = (out_dir / "objects.yaml").string();
     {
@@ -468,8 +499,14 @@ int main(int argc, char** argv) {
 
       if (k % args.detector_every == 0 && (args.detector_frames < 0 || k < args.detector_frames)) {
         for (size_t i = 0; i < n; ++i) {
-          const Pose noisy = perturb_pose(poses[i], objects[i].mesh.center(), args.rot_noise_deg * M_PI / 180.0,
-                                          args.trans_noise_m, detector_rng);
+          Pose noisy = perturb_pose(poses[i], objects[i].mesh.center(), args.rot_noise_deg * M_PI / 180.0,
+                                    args.trans_noise_m, detector_rng);
+          // A detector cannot tell a symmetric object's turn about its axis: it reports any (as DOPE does).
+          for (const ObjectSymmetry::Axis& a : objects[i].declared.continuous) {
+            const double turn = std::uniform_real_distribution<double>(0.0, 2 * M_PI)(detector_rng);
+            const Eigen::Matrix3d Rt = Eigen::AngleAxisd(turn, a.direction).toRotationMatrix();
+            noisy = noisy * Pose(Rt, a.offset - Rt * a.offset);
+          }
           Pending d;
           d.write_time = t + ros::Duration(args.detector_latency);
           d.topic = "/dope/pose_" + objects[i].name;

@@ -213,6 +213,8 @@ int main(int argc, char** argv) {
           line["depth_inliers"] = r.depth_inliers;
           line["loss_terms"] = {{"rgb", r.loss.rgb}, {"depth", r.loss.depth}, {"mask", r.loss.mask}};
           line["scan_turns"] = r.scan_turns;
+          line["print"] = {{"ncc", r.print.ncc}, {"best_shifted", r.print.best_shifted}, {"ring_mean", r.print.ring_mean},
+                           {"pixels", r.print.pixels}};
           if (r.curvature.valid) line["weakest_rise"] = r.curvature.weakest_rise;  // (pose_curvature.hpp)
           out << line.dump() << "\n";
           out.flush();

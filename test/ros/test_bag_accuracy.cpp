@@ -4,6 +4,8 @@
 #include <sensor_msgs/Image.h>
 #include <visualization_msgs/MarkerArray.h>
 #include <gtest/gtest.h>
+
+#include <algorithm>
 #include <ros/ros.h>
 #include <tf2_ros/buffer.h>
 #include <tf2_ros/transform_listener.h>
@@ -143,6 +145,22 @@ TEST(BagAccuracy, RefinedPosesTfAndScores) {
     EXPECT_NEAR(int(rec.per_object[o.name].size()), s.plausible, looped ? 1 : 0);
   }
   for (const auto& row : rec.checker->rows()) std::printf("%s\n", diffdope_ros::PoseChecker::formatRow(row).c_str());
+  // max_step_deg > 0: an object's consecutive published poses turn by at most this much (the objects move a few
+  // degrees per refined frame): a symmetric object must not spin or flip with its detections.
+  const double max_step_deg = pnh.param("max_step_deg", 0.0);
+  for (const auto& [name, poses] : rec.per_object) {
+    if (!(max_step_deg > 0)) break;
+    std::vector<geometry_msgs::PoseStamped> sorted = poses;
+    std::sort(sorted.begin(), sorted.end(), [](const auto& a, const auto& b) { return a.header.stamp < b.header.stamp; });
+    double worst = 0;
+    for (size_t k = 1; k < sorted.size(); ++k)
+      worst = std::max(worst, diffdope::rotation_angle(diffdope_ros::pose_from_msg(sorted[k - 1].pose, "refined").R,
+                                                       diffdope_ros::pose_from_msg(sorted[k].pose, "refined").R));
+    std::printf("%s: largest turn between consecutive published poses %.1f deg (%zu poses)\n", name.c_str(),
+                worst * 180 / M_PI, sorted.size());
+    EXPECT_GE(sorted.size(), 5u) << name;
+    EXPECT_LE(worst * 180 / M_PI, max_step_deg) << name << " spun or flipped between frames";
+  }
 
   double latency = 0;
   int tf_checked = 0;
