@@ -73,10 +73,13 @@ struct RefinerOptions {
   double no_mask_window = 0.3;  // [0, 10]
   /// Quality: a depth reading within this distance (metres) of the render is an inlier.
   double inlier_threshold = 0.01;  // (0, 10]
-  /// Verdict thresholds: plausible when mask IoU >= min_mask_iou (if a mask was given) and the depth inlier
-  /// fraction >= min_depth_inliers (if depth was given).
+  /// Verdict thresholds (verdict.hpp): plausible when mask IoU >= min_mask_iou (if a mask was given), the depth
+  /// inlier fraction >= min_depth_inliers (if depth was given) and the print lines up with the image's at least
+  /// min_print_significance standard deviations above its chance level (if the model has a print and rgb was
+  /// given; 0 = not weighed). 3 = the usual bar of a significant peak, not fitted to any data set.
   double min_mask_iou = 0.5;       // [0, 1]
   double min_depth_inliers = 0.5;  // [0, 1]
+  double min_print_significance = 3.0;  // [0, 100]
   /// The loss is probed around the result at this mean displacement of the model surface (metres, the unit of
   /// ADD): RefineResult::curvature, the loss's curvature and its least constrained direction (pose_curvature.hpp;
   /// 15 evaluations, ~1 % of a default refinement). 0 = no probe.
@@ -125,7 +128,8 @@ struct RefineResult {
   double depth_inliers = -1;          // fraction of object pixels (observed mask, else the render's) with a depth
                                       // reading within inlier_threshold of the render; -1 without depth
   bool converged = false;             // the winner's loss stopped improving (relative change < 1 % over the last 10 %)
-  bool plausible = false;             // scores pass the thresholds in RefinerOptions
+  bool plausible = false;             // every available score passes its threshold in RefinerOptions
+  double confidence = 0;              // [0, 1], the weakest score, 0.5 at its threshold (verdict.hpp)
   PrintRegistration print;            // whether the print lines up at the refined pose (ncc = -1: not measured)
   PoseCurvature curvature;            // the loss around the refined pose (valid = false when not probed:
                                       // probe_distance = 0, or a probe left the image)

@@ -1,6 +1,7 @@
 #pragma once
 // Evidence for the refiner's verdict that a pose is right, beyond how well its silhouette and depth fit: whether
 // the object's print lines up with the image's.
+#include <limits>
 #include <opencv2/core.hpp>
 
 namespace diffdope {
@@ -10,17 +11,49 @@ namespace diffdope {
 /// (silhouette edges excluded: they fit whenever the shape fits), by normalised cross-correlation at the
 /// render's own position and shifted by up to `radius` pixels.
 struct PrintRegistration {
-  double ncc = -1;         // correlation at the render's position, in [-1, 1]; -1 when not measurable
-  double best_shifted = -1;  // the highest correlation of the shifted positions (ring at Chebyshev distance radius)
-  double ring_mean = -1;   // mean correlation over that ring
-  int pixels = 0;          // interior pixels compared
+  double ncc = -1;   // correlation at the render's position, in [-1, 1]; -1 when not measurable
+  /// The best correlation over shifts of up to `radius` pixels, and that shift (image minus render, pixels): a
+  /// print that sits elsewhere in the image than in the render (a wrong turn of a bottle, a mug's handle side)
+  /// shows as a clearly better correlation away from zero.
+  double best_ncc = -1;
+  int best_dx = 0, best_dy = 0;
+  /// The correlation's spread over the shifts at least radius / 2 away (the chance level of this print).
+  double far_mean = 0, far_std = 0;
+  int pixels = 0;    // interior pixels compared
+  /// RMS texture gradient of the render over the interior: how much print the model has there (a plain model:
+  /// ~0, and nothing to register).
+  double render_contrast = 0;
+  /// How far the correlation at the render's position stands above this print's chance level, in standard
+  /// deviations of the far shifts' correlations; NaN when not measured.
+  double significance() const;
 };
+
+/// Below this RMS texture gradient the model has no print to register (a plain object): not measured.
+constexpr double kMinPrintContrast = 0.05;
 
 /// `observed_rgb`, `rendered_rgb`: CV_32FC3 of one size (the render premultiplied by coverage); `interior`:
 /// CV_8U, nonzero where both the render covers the object fully and the observation shows it (the caller's
 /// choice: eroded coverage ∩ observed mask). Fewer than `min_pixels` interior pixels, or a print without
-/// contrast on either side, give ncc = -1.
+/// contrast on either side (render_contrast < kMinPrintContrast), give ncc = -1.
 PrintRegistration register_print(const cv::Mat& observed_rgb, const cv::Mat& rendered_rgb, const cv::Mat& interior,
-                                 int radius = 2, double epsilon = 0.03, int min_pixels = 50);
+                                 int radius = 8, double epsilon = 0.03, int min_pixels = 50);
+
+/// What the verdict weighs; each is optional.
+struct VerdictEvidence {
+  double mask_iou = -1;       // -1: no observed mask
+  double depth_inliers = -1;  // -1: no depth
+  double print_significance = std::numeric_limits<double>::quiet_NaN();  // NaN: no print measured
+};
+
+struct Verdict {
+  /// In [0, 1]: the weakest of the evidence's scores, each 0.5 at its threshold (1 = perfect: IoU or inlier
+  /// fraction 1; a print significance far above its threshold, z / (z + threshold)). 0.5 without evidence.
+  double confidence = 0.5;
+  bool plausible = true;  // every available evidence passes its threshold
+};
+
+/// Thresholds as in RefinerOptions: min_mask_iou, min_depth_inliers (fractions in [0, 1]) and
+/// min_print_significance (standard deviations; 0 = the print is not weighed).
+Verdict judge(const VerdictEvidence& e, double min_mask_iou, double min_depth_inliers, double min_print_significance);
 
 }  // namespace diffdope

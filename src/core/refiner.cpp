@@ -400,7 +400,7 @@ RefineResult RefineRun::finish(Renderer& renderer) {
     cv::Mat interior = img.coverage >= 0.999f;
     if (has_mask_) interior &= cv::Mat(obs.mask >= 0.5f);
     cv::erode(interior, interior, cv::getStructuringElement(cv::MORPH_RECT, cv::Size(5, 5)));
-    res.print = register_print(obs.rgb, img.color, interior, 2, loss_.texture_epsilon);
+    res.print = register_print(obs.rgb, img.color, interior, 8, loss_.texture_epsilon);
   }
   if (o.probe_distance > 0 && std::isfinite(res.loss.total))
     res.curvature = probe_pose_curvature(renderer, cam, mesh_, obs, loss_, res.pose, o.probe_distance,
@@ -410,8 +410,14 @@ RefineResult RefineRun::finish(Renderer& renderer) {
     const double a = res.history[n - tail], b = res.history.back();
     res.converged = std::abs(a - b) <= 0.01 * std::max(std::abs(a), 1e-12);
   }
-  res.plausible = std::isfinite(res.loss.total) && (res.mask_iou < 0 || res.mask_iou >= o.min_mask_iou) &&
-                  (res.depth_inliers < 0 || res.depth_inliers >= o.min_depth_inliers);
+  VerdictEvidence evidence;
+  evidence.mask_iou = res.mask_iou;
+  evidence.depth_inliers = res.depth_inliers;
+  // A continuous declared symmetry turns the print with the object: it cannot be registered along that axis.
+  if (mesh_.symmetry.continuous.empty()) evidence.print_significance = res.print.significance();
+  const Verdict verdict = judge(evidence, o.min_mask_iou, o.min_depth_inliers, o.min_print_significance);
+  res.plausible = std::isfinite(res.loss.total) && verdict.plausible;
+  res.confidence = std::isfinite(res.loss.total) ? verdict.confidence : 0.0;
   res.time_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start_time_).count();
   return res;
 }

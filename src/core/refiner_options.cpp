@@ -66,6 +66,7 @@ RefinerOptions parse(const YAML::Node& root, RefinerOptions o, const std::string
     read(root, "inlier_threshold", o.inlier_threshold, used);
     read(root, "min_mask_iou", o.min_mask_iou, used);
     read(root, "min_depth_inliers", o.min_depth_inliers, used);
+    read(root, "min_print_significance", o.min_print_significance, used);
     read(root, "probe_distance", o.probe_distance, used);
     read(root, "device", o.device, used);
     used.insert("loss");
@@ -210,6 +211,7 @@ void RefinerOptions::validate() const {
   check.above("inlier_threshold", inlier_threshold, 0, 10, " metres");
   check("min_mask_iou", min_mask_iou, 0, 1);
   check("min_depth_inliers", min_depth_inliers, 0, 1);
+  check("min_print_significance", min_print_significance, 0, 100);
   check("probe_distance", probe_distance, 0, 1, " metres");
   if (device != "cpu" && device != "cuda" && device != "auto") check.fail("device must be auto, cpu or cuda");
   loss.validate();

@@ -362,6 +362,7 @@ std::vector<diffdope_ros::RefinedPose> RefinerNodelet::refineAndPublish(
     p.initial_loss = r.initial_loss;
     p.converged = r.converged;
     p.plausible = r.plausible;
+    p.confidence = r.confidence;
     p.iterations = r.iterations;
     p.time_ms = r.time_ms;
     out.push_back(p);

@@ -211,10 +211,12 @@ int main(int argc, char** argv) {
                                  {"mask_iou", r.mask_iou}, {"plausible", r.plausible},
                                  {"winner_lr", r.learning_rates[r.winner]}};
           line["depth_inliers"] = r.depth_inliers;
+          line["confidence"] = r.confidence;
           line["loss_terms"] = {{"rgb", r.loss.rgb}, {"depth", r.loss.depth}, {"mask", r.loss.mask}};
           line["scan_turns"] = r.scan_turns;
-          line["print"] = {{"ncc", r.print.ncc}, {"best_shifted", r.print.best_shifted}, {"ring_mean", r.print.ring_mean},
-                           {"pixels", r.print.pixels}};
+          line["print"] = {{"ncc", r.print.ncc}, {"best_ncc", r.print.best_ncc}, {"best_dx", r.print.best_dx},
+                           {"best_dy", r.print.best_dy}, {"far_mean", r.print.far_mean}, {"far_std", r.print.far_std},
+                           {"pixels", r.print.pixels}, {"render_contrast", r.print.render_contrast}};
           if (r.curvature.valid) line["weakest_rise"] = r.curvature.weakest_rise;  // (pose_curvature.hpp)
           out << line.dump() << "\n";
           out.flush();

@@ -347,6 +347,9 @@ nlohmann::ordered_json pose_json(const RefineResult& r) {
               {"depth_inliers", r.depth_inliers},
               {"converged", r.converged},
               {"plausible", r.plausible},
+              {"confidence", r.confidence},
+              {"print_significance", std::isfinite(r.print.significance()) ? nlohmann::json(r.print.significance())
+                                                                           : nlohmann::json(nullptr)},
               {"winner", r.winner},
               {"learning_rate", lr}};
 }
@@ -515,10 +518,12 @@ int run(const Args& a) {
                 rotation_angle(p.R, initial.R) * 180 / M_PI);
     std::printf("loss %.5f -> %.5f (rgb %.4f, depth %.4f, mask %.4f)\n", r.initial_loss, r.loss.total, r.loss.rgb,
                 r.loss.depth, r.loss.mask);
-    std::printf("mask IoU %s, depth inliers %s, converged %s, plausible %s\n",
+    const double z = r.print.significance();
+    std::printf("mask IoU %s, depth inliers %s, print %s, converged %s, plausible %s (confidence %.2f)\n",
                 r.mask_iou < 0 ? "n/a" : fmt(r.mask_iou, "%.3f").c_str(),
-                r.depth_inliers < 0 ? "n/a" : fmt(r.depth_inliers, "%.3f").c_str(), r.converged ? "yes" : "no",
-                r.plausible ? "yes" : "NO");
+                r.depth_inliers < 0 ? "n/a" : fmt(r.depth_inliers, "%.3f").c_str(),
+                std::isfinite(z) ? fmt(z, "%.1f sigma").c_str() : "n/a", r.converged ? "yes" : "no",
+                r.plausible ? "yes" : "NO", r.confidence);
     std::printf("time %.0f ms (B=%d, %d iterations, image scale %.2f, winner #%d, lr %.5f)\n", r.time_ms,
                 options.batch_size, r.iterations, options.image_scale, r.winner,
                 r.winner >= 0 ? r.learning_rates[r.winner] : 0.0);

@@ -1,0 +1,132 @@
+// The verdict (verdict.hpp): the print registration test and how the evidence becomes plausible / confidence.
+#include <gtest/gtest.h>
+
+#include <Eigen/Geometry>
+#include <cmath>
+#include <limits>
+#include <opencv2/imgproc.hpp>
+
+#include "diffdope/device.hpp"
+#include "diffdope/procedural.hpp"
+#include "diffdope/refiner.hpp"
+#include "diffdope/synthetic.hpp"
+#include "diffdope/verdict.hpp"
+
+using namespace diffdope;
+
+namespace {
+
+/// A printed image (random blobs), lit: a gain and a smooth shading ramp (what a flat render does not have).
+cv::Mat printed(int w, int h, uint32_t seed, double gain) {
+  cv::Mat noise(h / 4, w / 4, CV_32FC3);
+  cv::RNG rng(seed);
+  rng.fill(noise, cv::RNG::UNIFORM, 0.1, 0.9);
+  cv::Mat img;
+  cv::resize(noise, img, cv::Size(w, h), 0, 0, cv::INTER_LINEAR);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) img.at<cv::Vec3f>(y, x) *= float(gain * (0.7 + 0.3 * x / w));
+  return img;
+}
+
+cv::Mat shifted(const cv::Mat& img, int dx, int dy) {
+  cv::Mat out;
+  const cv::Mat M = (cv::Mat_<double>(2, 3) << 1, 0, dx, 0, 1, dy);
+  cv::warpAffine(img, out, M, img.size(), cv::INTER_NEAREST, cv::BORDER_REFLECT);
+  return out;
+}
+
+}  // namespace
+
+TEST(PrintRegistration, ALitImageOfTheSamePrintRegistersAtZeroAndAShiftedOneDoesNot) {
+  const cv::Mat render = printed(160, 120, 3, 1.0);
+  cv::Mat interior = cv::Mat::zeros(120, 160, CV_8U);
+  interior(cv::Rect(30, 20, 100, 80)).setTo(1);
+  const PrintRegistration same = register_print(printed(160, 120, 3, 0.6), render, interior);
+  EXPECT_GT(same.ncc, 0.8);
+  EXPECT_EQ(same.best_dx, 0);
+  EXPECT_EQ(same.best_dy, 0);
+  EXPECT_GT(same.significance(), 5.0);
+  EXPECT_GT(same.render_contrast, kMinPrintContrast);
+  // The print sits 5 px to the right in the image: found there, and nothing at zero.
+  const PrintRegistration moved = register_print(shifted(printed(160, 120, 3, 0.6), 5, 0), render, interior);
+  EXPECT_EQ(moved.best_dx, 5);
+  EXPECT_EQ(moved.best_dy, 0);
+  EXPECT_LT(moved.significance(), 2.0);
+  EXPECT_GT(moved.best_ncc, 0.8);
+  // Another print altogether: nothing registers.
+  EXPECT_LT(register_print(printed(160, 120, 99, 0.6), render, interior).significance(), 3.0);
+}
+
+TEST(PrintRegistration, APlainModelOrTooFewPixelsAreNotMeasured) {
+  const cv::Mat image = printed(160, 120, 3, 1.0);
+  cv::Mat interior = cv::Mat::zeros(120, 160, CV_8U);
+  interior(cv::Rect(30, 20, 100, 80)).setTo(1);
+  const cv::Mat plain(120, 160, CV_32FC3, cv::Scalar(0.5, 0.4, 0.3));
+  const PrintRegistration p = register_print(image, plain, interior);
+  EXPECT_EQ(p.ncc, -1);
+  EXPECT_TRUE(std::isnan(p.significance()));
+  cv::Mat tiny = cv::Mat::zeros(120, 160, CV_8U);
+  tiny(cv::Rect(50, 50, 5, 5)).setTo(1);
+  EXPECT_EQ(register_print(image, image, tiny).ncc, -1);
+  EXPECT_EQ(register_print(image, cv::Mat(), interior).ncc, -1);  // no render: nothing, no throw
+}
+
+TEST(Verdict, EachEvidenceScoresHalfAtItsThresholdAndTheWeakestDecides) {
+  VerdictEvidence e;
+  const Verdict none = judge(e, 0.5, 0.5, 3.0);
+  EXPECT_TRUE(none.plausible);
+  EXPECT_DOUBLE_EQ(none.confidence, 0.5);  // no evidence: unknown
+  e.mask_iou = 0.5;
+  EXPECT_DOUBLE_EQ(judge(e, 0.5, 0.5, 3.0).confidence, 0.5);
+  e.mask_iou = 1.0;
+  e.depth_inliers = 0.75;
+  EXPECT_DOUBLE_EQ(judge(e, 0.5, 0.5, 3.0).confidence, 0.75);
+  e.print_significance = 9.0;  // 9 / (9 + 3)
+  Verdict v = judge(e, 0.5, 0.5, 3.0);
+  EXPECT_DOUBLE_EQ(v.confidence, 0.75);
+  EXPECT_TRUE(v.plausible);
+  e.print_significance = 1.0;  // the print does not line up: implausible whatever the shape says
+  v = judge(e, 0.5, 0.5, 3.0);
+  EXPECT_FALSE(v.plausible);
+  EXPECT_DOUBLE_EQ(v.confidence, 0.25);
+  EXPECT_TRUE(judge(e, 0.5, 0.5, 0.0).plausible);  // 0: the print is not weighed
+  e.print_significance = -2;
+  EXPECT_DOUBLE_EQ(judge(e, 0.5, 0.5, 3.0).confidence, 0.0);
+  e.print_significance = std::numeric_limits<double>::quiet_NaN();
+  e.depth_inliers = 0.4;
+  v = judge(e, 0.5, 0.5, 3.0);
+  EXPECT_FALSE(v.plausible);
+  EXPECT_DOUBLE_EQ(v.confidence, 0.4);
+}
+
+TEST(Verdict, TheRefinerTrustsARightPrintAndNotAWrongTurn) {
+  // A labelled can seen from the side: at the truth its print lines up; turned 60 degrees about its axis (what
+  // silhouette and depth cannot see) it does not, and the verdict says so although mask and depth fit.
+  const Camera cam{420, 420, 159.5, 119.5, 320, 240};
+  const Mesh can = make_cylinder(0.035, 0.11, 64, make_label_texture(256, 7));
+  Vector6d d;
+  d << 0, 0, 0, 1.3, 0.2, 0.1;
+  const Pose truth(se3_exp(d).R, Eigen::Vector3d(0.0, 0.0, 0.45));
+  auto renderer = make_cpu_renderer();
+  SyntheticNoise noise;
+  noise.brightness = 0.8;
+  const Observation obs = synthesize_observation(*renderer, cam, can, truth, noise, 3);
+  RefinerOptions o;
+  o.batch_size = 4;
+  o.iterations = 0;  // score the start itself
+  o.image_scale = 1.0;
+  o.explore_tolerance = 0;
+  const RefineResult right = Refiner(o).refine(cam, obs, can, truth);
+  const Pose turned = truth * Pose(Eigen::AngleAxisd(M_PI / 3, Eigen::Vector3d::UnitZ()).toRotationMatrix(),
+                                   Eigen::Vector3d::Zero());
+  const RefineResult wrong = Refiner(o).refine(cam, obs, can, turned);
+  EXPECT_GT(right.mask_iou, 0.9);
+  EXPECT_GT(wrong.mask_iou, 0.9);  // the shape fits either way
+  EXPECT_GT(wrong.depth_inliers, 0.9);
+  EXPECT_TRUE(right.plausible);
+  EXPECT_GT(right.print.significance(), 3.0);
+  EXPECT_FALSE(wrong.plausible);
+  EXPECT_LT(wrong.print.significance(), 3.0);
+  EXPECT_GT(right.confidence, 0.5);
+  EXPECT_LT(wrong.confidence, 0.5);
+}
