@@ -8,6 +8,7 @@
 #include "diffdope/refiner.hpp"
 #include "diffdope/renderer.hpp"
 #include "diffdope/synthetic.hpp"
+#include "labelled_can.hpp"
 
 using namespace diffdope;
 
@@ -84,15 +85,12 @@ TEST(Refiner, ARollOnlyTheLabelShowsIsFoundByTheShapeScan) {
   // A labelled can seen from the side, started half a turn off about its axis: silhouette and depth fit the
   // start as well as the truth, so descent stays there; the scan of the turns about the axis finds the label.
   // (Our own renders: the plain colour term sees the label. Real images need loss.weight_texture.)
-  const Camera cam{420, 420, 159.5, 119.5, 320, 240};
-  const Mesh can = make_cylinder(0.035, 0.11, 64, make_label_texture(256, 7));
-  Vector6d d;
-  d << 0, 0, 0, 1.3, 0.2, 0.1;
-  const Pose truth(se3_exp(d).R, Eigen::Vector3d(0.0, 0.0, 0.45));
-  auto renderer = make_cpu_renderer();
-  const Observation obs = synthesize_observation(*renderer, cam, can, truth, SyntheticNoise(), 3);
-  const Pose about_axis(Eigen::AngleAxisd(M_PI, Eigen::Vector3d::UnitZ()).toRotationMatrix(), Eigen::Vector3d::Zero());
-  const Pose start = truth * about_axis;
+  const test::LabelledCan s = test::labelled_can();
+  const Camera& cam = s.cam;
+  const Mesh& can = s.can;
+  const Pose& truth = s.truth;
+  const Observation& obs = s.obs;
+  const Pose start = truth * test::about_can_axis(180);
   RefinerOptions o;
   o.batch_size = 16;
   o.iterations = 40;

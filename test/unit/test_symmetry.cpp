@@ -10,6 +10,7 @@
 #include "diffdope/procedural.hpp"
 #include "diffdope/refiner.hpp"
 #include "diffdope/synthetic.hpp"
+#include "labelled_can.hpp"
 
 using namespace diffdope;
 
@@ -128,33 +129,25 @@ TEST(Symmetry, TheObjectsConfigDeclaresThem) {
 }
 
 TEST(Symmetry, TheRefinerDoesNotScanDeclaredTurnsAndReportsTheTurnNearestItsStart) {
-  // A labelled can started half a turn off about its axis. Undeclared, the shape scan turns it to its label.
-  // Declared symmetric (about its axis, and end over end), no turn is tried and the result keeps the start's
-  // turn (a track does not spin), while its axis and position are still refined.
-  const Camera cam{420, 420, 159.5, 119.5, 320, 240};
-  Mesh can = make_cylinder(0.035, 0.11, 64, make_label_texture(256, 7));
-  Vector6d d;
-  d << 0, 0, 0, 1.3, 0.2, 0.1;
-  const Pose truth(se3_exp(d).R, Eigen::Vector3d(0.0, 0.0, 0.45));
-  auto renderer = make_cpu_renderer();
-  const Observation obs = synthesize_observation(*renderer, cam, can, truth, SyntheticNoise(), 3);
-  const Pose half_turn = truth * Pose(rot(180, Eigen::Vector3d::UnitZ()), Eigen::Vector3d::Zero());
+  // A labelled can started half a turn off about its axis (undeclared, the scan turns it to its label:
+  // Refiner.ARollOnlyTheLabelShowsIsFoundByTheShapeScan). Declared symmetric (about its axis, and end over end),
+  // no turn is tried and the result keeps the start's turn (a track does not spin), while its axis and position
+  // are still refined.
+  test::LabelledCan s = test::labelled_can();
+  const Pose half_turn = s.truth * test::about_can_axis(180);
   RefinerOptions o;
   o.batch_size = 16;
   o.iterations = 40;
   o.image_scale = 1.0;
-  const RefineResult undeclared = Refiner(o).refine(cam, obs, can, half_turn);
-  EXPECT_GT(undeclared.scan_turns, 0);
-  EXPECT_LT(deg(rotation_angle(undeclared.pose.R, truth.R)), 3.0);
-  can.symmetry = about_z();
-  can.symmetry.discrete.push_back(Pose(rot(180, Eigen::Vector3d::UnitX()), Eigen::Vector3d::Zero()));
+  s.can.symmetry = about_z();
+  s.can.symmetry.discrete.push_back(Pose(rot(180, Eigen::Vector3d::UnitX()), Eigen::Vector3d::Zero()));
   // Off by 4 degrees (not about the axis) and 4 mm.
   const Pose start(rot(4, {1, 1, 0}) * half_turn.R, half_turn.t + Eigen::Vector3d(0.004, 0, 0));
-  const RefineResult declared = Refiner(o).refine(cam, obs, can, start);
+  const RefineResult declared = Refiner(o).refine(s.cam, s.obs, s.can, start);
   EXPECT_EQ(declared.scan_turns, 0);
   EXPECT_LT(deg(rotation_angle(declared.pose.R, half_turn.R)), 5.0);
-  EXPECT_LT(deg(std::acos(std::min(1.0, declared.pose.R.col(2).dot(truth.R.col(2))))), 1.5);  // the axis
-  EXPECT_LT((declared.pose.t - truth.t).norm(), 0.002);
+  EXPECT_LT(deg(std::acos(std::min(1.0, declared.pose.R.col(2).dot(s.truth.R.col(2))))), 1.5);  // the axis
+  EXPECT_LT((declared.pose.t - s.truth.t).norm(), 0.002);
 }
 
 TEST(PoseCurvature, TheWeakestDirectionOfAPlainCylinderIsItsAxisUnlessDeclared) {

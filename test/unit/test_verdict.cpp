@@ -11,6 +11,7 @@
 #include "diffdope/refiner.hpp"
 #include "diffdope/synthetic.hpp"
 #include "diffdope/verdict.hpp"
+#include "labelled_can.hpp"
 
 using namespace diffdope;
 
@@ -102,23 +103,20 @@ TEST(Verdict, EachEvidenceScoresHalfAtItsThresholdAndTheWeakestDecides) {
 TEST(Verdict, TheRefinerTrustsARightPrintAndNotAWrongTurn) {
   // A labelled can seen from the side: at the truth its print lines up; turned 60 degrees about its axis (what
   // silhouette and depth cannot see) it does not, and the verdict says so although mask and depth fit.
-  const Camera cam{420, 420, 159.5, 119.5, 320, 240};
-  const Mesh can = make_cylinder(0.035, 0.11, 64, make_label_texture(256, 7));
-  Vector6d d;
-  d << 0, 0, 0, 1.3, 0.2, 0.1;
-  const Pose truth(se3_exp(d).R, Eigen::Vector3d(0.0, 0.0, 0.45));
-  auto renderer = make_cpu_renderer();
   SyntheticNoise noise;
   noise.brightness = 0.8;
-  const Observation obs = synthesize_observation(*renderer, cam, can, truth, noise, 3);
+  const test::LabelledCan s = test::labelled_can(noise);
+  const Camera& cam = s.cam;
+  const Mesh& can = s.can;
+  const Pose& truth = s.truth;
+  const Observation& obs = s.obs;
   RefinerOptions o;
   o.batch_size = 4;
   o.iterations = 0;  // score the start itself
   o.image_scale = 1.0;
   o.explore_tolerance = 0;
   const RefineResult right = Refiner(o).refine(cam, obs, can, truth);
-  const Pose turned = truth * Pose(Eigen::AngleAxisd(M_PI / 3, Eigen::Vector3d::UnitZ()).toRotationMatrix(),
-                                   Eigen::Vector3d::Zero());
+  const Pose turned = truth * test::about_can_axis(60);
   const RefineResult wrong = Refiner(o).refine(cam, obs, can, turned);
   EXPECT_GT(right.mask_iou, 0.9);
   EXPECT_GT(wrong.mask_iou, 0.9);  // the shape fits either way
