@@ -139,7 +139,15 @@ TEST(BagAccuracy, RefinedPosesTfAndScores) {
       EXPECT_LT(ref_t, init_t);
       EXPECT_LT(ref_r, init_r);
     }
-    EXPECT_EQ(s.plausible, s.count);
+    if (each_within) {
+      EXPECT_EQ(s.plausible, s.count);
+    } else {
+      // RGB alone drifts along the viewing ray (1-5 cm while tracking): the verdict may reject those poses (their
+      // print no longer lines up) but never a right one.
+      for (const auto& row : rec.checker->rows())
+        if (row.name == o.name && !row.plausible)
+          EXPECT_GT(row.refined.translation_m, 0.01) << "a pose within 1 cm called implausible";
+    }
     // Every plausible refined pose also went out on ~refined/<name> and on TF.
     // (Looped: recording stops at an arbitrary moment, maybe between a frame's array and its per-object poses.)
     EXPECT_NEAR(int(rec.per_object[o.name].size()), s.plausible, looped ? 1 : 0);
