@@ -8,6 +8,8 @@
 
 #include <opencv2/core.hpp>
 #include <string>
+#include <utility>
+#include <vector>
 
 #include "diffdope/camera.hpp"
 #include "diffdope/pose.hpp"
@@ -46,5 +48,12 @@ std::string strip_slash(const std::string& frame_id);
 
 /// v with `precision` decimals, for log messages and diagnostics.
 std::string format_fixed(double v, int precision = 3);
+
+/// The image transports the node's parameters ask for that image_transport cannot load: one message naming each
+/// parameter, its value and what is installed; empty when every one is loadable. `loadable`:
+/// ImageTransport::getLoadableTransports() ("image_transport/raw": the transport's name follows the '/');
+/// `requested`: (parameter, transport) pairs.
+std::string unknown_transports(const std::vector<std::string>& loadable,
+                               const std::vector<std::pair<std::string, std::string>>& requested);
 
 }  // namespace diffdope_ros

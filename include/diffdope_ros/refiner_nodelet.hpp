@@ -155,6 +155,7 @@ class RefinerNodelet : public nodelet::Nodelet {
 
   // Inputs.
   std::unique_ptr<image_transport::ImageTransport> it_;
+  std::string input_error_;  // set at start when an input cannot be subscribed (an unknown transport)
   image_transport::SubscriberFilter rgb_sub_, depth_sub_, mask_sub_;
   message_filters::Subscriber<sensor_msgs::CameraInfo> info_sub_;
   // Each input checked on its own before the synchronizer (encoding, size, step; intrinsics).

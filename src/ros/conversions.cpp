@@ -1,5 +1,7 @@
 #include "diffdope_ros/conversions.hpp"
 
+#include <algorithm>
+
 #include <cv_bridge/cv_bridge.h>
 #include <sensor_msgs/image_encodings.h>
 
@@ -160,6 +162,21 @@ std::string format_fixed(double v, int precision) {
   s.precision(precision);
   s << v;
   return s.str();
+}
+
+std::string unknown_transports(const std::vector<std::string>& loadable,
+                               const std::vector<std::pair<std::string, std::string>>& requested) {
+  std::vector<std::string> names;
+  for (const std::string& l : loadable) names.push_back(l.substr(l.rfind('/') + 1));
+  std::string installed;
+  for (const std::string& n : names) installed += (installed.empty() ? "" : ", ") + n;
+  std::string out;
+  for (const auto& [param, transport] : requested) {
+    if (std::find(names.begin(), names.end(), transport) != names.end()) continue;
+    out += (out.empty() ? "" : "; ") + std::string("~") + param + ": '" + transport + "' is not an installed image transport";
+  }
+  if (!out.empty()) out += " (installed: " + (installed.empty() ? std::string("none") : installed) + ")";
+  return out;
 }
 
 }  // namespace diffdope_ros

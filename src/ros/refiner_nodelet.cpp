@@ -168,12 +168,24 @@ void RefinerNodelet::setupInputs() {
   }
   initial_poses_sub_ = pnh.subscribe("initial_poses", 5, &RefinerNodelet::onInitialPoses, this);
 
-  // ~image_transport selects the transport (raw, compressed, ...) for every image input.
-  const image_transport::TransportHints hints("raw", ros::TransportHints(), pnh);
+  // Each image input has its own transport, as depth_image_proc does: a robot that records colour as
+  // "compressed" needs "compressedDepth" (or raw) for depth, and a label mask must stay lossless.
+  const image_transport::TransportHints hints("raw", ros::TransportHints(), pnh, "image_transport");
+  const image_transport::TransportHints depth_hints("raw", ros::TransportHints(), pnh, "depth_image_transport");
+  const image_transport::TransportHints mask_hints("raw", ros::TransportHints(), pnh, "mask_image_transport");
+  input_error_ = unknown_transports(
+      it_->getLoadableTransports(),
+      {{"image_transport", hints.getTransport()},
+       {"depth_image_transport", use_depth_ ? depth_hints.getTransport() : "raw"},
+       {"mask_image_transport", use_mask_ ? mask_hints.getTransport() : "raw"}});
+  if (!input_error_.empty()) {  // a clear error at start; the node stays up and says so in diagnostics
+    errors_.error("transport", input_error_);
+    return;
+  }
   rgb_sub_.subscribe(*it_, "rgb/image_rect_color", queue_size_, hints);
   info_sub_.subscribe(nh, "rgb/camera_info", queue_size_);
-  if (use_depth_) depth_sub_.subscribe(*it_, "depth/image_rect", queue_size_, hints);
-  if (use_mask_) mask_sub_.subscribe(*it_, "mask", queue_size_, hints);
+  if (use_depth_) depth_sub_.subscribe(*it_, "depth/image_rect", queue_size_, depth_hints);
+  if (use_mask_) mask_sub_.subscribe(*it_, "mask", queue_size_, mask_hints);
   using sensor_msgs::CameraInfo;
   using sensor_msgs::Image;
   const auto arrive = [this](int index) { return [this, index](const auto& m) { noteArrival(index, m.header); }; };
@@ -427,10 +439,12 @@ void RefinerNodelet::onDiagnostics(diagnostic_updater::DiagnosticStatusWrapper& 
                                                       : "off (mode on_request)")
                                            : (serving ? "paused for " + serving_for + ": serving a ~refine call"
                                                       : "running");
-  if (enabled == 0) stat.summary(diagnostic_msgs::DiagnosticStatus::ERROR, "no object can be refined: " + e.last_error);
+  if (!input_error_.empty()) stat.summary(diagnostic_msgs::DiagnosticStatus::ERROR, "no input subscribed: " + input_error_);
+  else if (enabled == 0) stat.summary(diagnostic_msgs::DiagnosticStatus::ERROR, "no object can be refined: " + e.last_error);
   else if (recent_error) stat.summary(diagnostic_msgs::DiagnosticStatus::WARN, e.last_error);
   else stat.summary(diagnostic_msgs::DiagnosticStatus::OK, serving && !on_request ? "streaming " + streaming : "refining");
   stat.add("streaming", streaming);
+  stat.add("inputs", input_error_.empty() ? "subscribed" : "none: " + input_error_);
   stat.add("objects enabled", std::to_string(enabled) + " of " + std::to_string(slots_.size()));
   stat.add("backend", refiner_ ? refiner_->backend() : std::string("none (configuration error)"));
   for (const auto& slot : slots_)

@@ -114,6 +114,28 @@ struct Node {
 };
 Node* node = nullptr;
 
+// transport.test only (the node there asks for a depth transport that is not installed).
+TEST(BadInput, UnknownTransportIsAnErrorAtStart) {
+  const ros::WallTime start = ros::WallTime::now();
+  std::string text;
+  while ((ros::WallTime::now() - start).toSec() < 15) {
+    {
+      std::lock_guard<std::mutex> l(node->mutex);
+      text = node->diagnostics_text;
+    }
+    if (text.find("inputs: ") != std::string::npos) break;
+    ros::WallDuration(0.2).sleep();
+  }
+  EXPECT_NE(text.find("no input subscribed: ~depth_image_transport: 'nosuch' is not an installed image transport"),
+            std::string::npos) << text;
+  EXPECT_NE(text.find("installed: "), std::string::npos) << text;
+  EXPECT_NE(text.find("raw"), std::string::npos) << text;
+  // The node is up (its service answers) but refines nothing.
+  diffdope_ros::Refine srv;
+  srv.request.object_names = {"box"};
+  EXPECT_TRUE(ros::service::call("/diffdope_refiner/refine", srv));
+}
+
 TEST(BadInput, BrokenMeshesDisableOnlyTheirObjects) {
   // Start-up errors may predate this test's /rosout subscription: diagnostics keep them.
   const ros::WallTime start = ros::WallTime::now();

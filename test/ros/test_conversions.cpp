@@ -624,3 +624,17 @@ int main(int argc, char** argv) {
   testing::InitGoogleTest(&argc, argv);
   return RUN_ALL_TESTS();
 }
+
+TEST(Transports, UnknownOnesAreNamedWithWhatIsInstalled) {
+  const std::vector<std::string> loadable{"image_transport/raw", "compressed_image_transport/compressed"};
+  EXPECT_EQ(diffdope_ros::unknown_transports(loadable, {{"image_transport", "compressed"},
+                                                        {"depth_image_transport", "raw"}}),
+            "");
+  const std::string e = diffdope_ros::unknown_transports(
+      loadable, {{"image_transport", "raw"}, {"depth_image_transport", "compressedDepth"}, {"mask_image_transport", "x"}});
+  EXPECT_NE(e.find("~depth_image_transport: 'compressedDepth' is not an installed image transport"), std::string::npos) << e;
+  EXPECT_NE(e.find("~mask_image_transport: 'x'"), std::string::npos) << e;
+  EXPECT_EQ(e.find("~image_transport"), std::string::npos) << e;
+  EXPECT_NE(e.find("(installed: raw, compressed)"), std::string::npos) << e;
+  EXPECT_NE(diffdope_ros::unknown_transports({}, {{"image_transport", "raw"}}).find("installed: none"), std::string::npos);
+}
