@@ -52,10 +52,29 @@ struct PoseCurvature {
 
 /// Probes the loss of `mesh` at `pose` (camera frame) against `observed`, about the pivot pose * mesh.center().
 /// `free_twists`: twists about that pivot along which a declared symmetry makes the object look the same on
-/// purpose (symmetry.hpp); they are projected out before the weakest direction is sought. `distance`: surface displacement (metres) of the rise probe; the
-/// Hessian's differences use half of it.
+/// purpose (symmetry.hpp); they are projected out before the weakest direction is sought. `distance`: surface
+/// displacement (metres) of the rise probe; the Hessian's differences use half of it.
 PoseCurvature probe_pose_curvature(Renderer& renderer, const Camera& camera, const Mesh& mesh,
                                    const Observation& observed, const LossOptions& loss, const Pose& pose,
                                    double distance, const std::vector<Vector6d>& free_twists = {});
+
+/// Neighbouring pixels' residuals are not independent (antialiasing, texture filtering, image resampling): the
+/// covariance counts one independent observation per this many pixels.
+constexpr double kCorrelatedPixels = 4.0;
+
+/// A covariance of the pose from the loss's curvature (a Laplace approximation). The loss, a mean of L1
+/// residuals over `pixels` object pixels, is read as the negative log-likelihood N · L / L* of Laplace noise
+/// whose scale is the residual L* the pose leaves (N = pixels / kCorrelatedPixels), so Σ = L* / N · H⁻¹, H the
+/// probe's Hessian. Directions the secant Hessian does not see curved upwards (flat, or negative: not a clean
+/// minimum) get the largest variance allowed, `max_std` metres of mean surface displacement (the object's
+/// size: beyond it nothing is known), as do the free twists of a declared symmetry. Of the twist about the
+/// pivot (v metres, w radians, camera axes), as PoseCurvature::hessian; zero when `c` is not valid.
+Matrix6d pose_covariance(const PoseCurvature& c, int pixels, double max_std);
+
+/// The same covariance for the frame whose origin is `origin` (camera frame), ROS's PoseWithCovariance
+/// convention: (x, y, z) the origin's displacement in metres, then rotations in radians about the camera's x, y,
+/// z axes (the header frame's), row-major.
+Matrix6d covariance_at_origin(const Matrix6d& twist_covariance, const Eigen::Vector3d& pivot,
+                              const Eigen::Vector3d& origin);
 
 }  // namespace diffdope

@@ -133,6 +133,10 @@ struct RefineResult {
   PrintRegistration print;            // whether the print lines up at the refined pose (ncc = -1: not measured)
   PoseCurvature curvature;            // the loss around the refined pose (valid = false when not probed:
                                       // probe_distance = 0, or a probe left the image)
+  /// From the curvature (pose_covariance()): of the twist about `pivot` (v m, w rad, camera axes); zero when not
+  /// probed. covariance_at_origin(covariance, pivot, frame_origin) gives ROS's PoseWithCovariance layout.
+  Matrix6d covariance = Matrix6d::Zero();
+  Eigen::Vector3d pivot = Eigen::Vector3d::Zero();  // the object's centre at the refined pose (camera frame)
   std::string error;                  // refine_all(): why this object could not be refined (empty = refined)
 };
 

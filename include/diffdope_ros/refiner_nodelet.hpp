@@ -9,6 +9,7 @@
 #include <cv_bridge/cv_bridge.h>
 #include <diagnostic_updater/diagnostic_updater.h>
 #include <geometry_msgs/PoseStamped.h>
+#include <geometry_msgs/PoseWithCovarianceStamped.h>
 #include <image_transport/image_transport.h>
 #include <image_transport/subscriber_filter.h>
 #include <message_filters/subscriber.h>
@@ -75,6 +76,7 @@ class RefinerNodelet : public nodelet::Nodelet {
     std::optional<geometry_msgs::PoseStamped> pending_detection;  // raw detector message, any frame
     ros::Subscriber detection_sub;
     ros::Publisher pose_pub;
+    ros::Publisher cov_pub;  // ~refined_cov/<name>: the same pose with its covariance
     std::atomic<bool> tracking{false};  // track.tracking() for diagnostics (the track itself is the worker's)
     ros::Time last_tf_stamp;  // tf2 rejects a second transform at the same stamp (service on the same frame)
   };

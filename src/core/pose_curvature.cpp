@@ -130,4 +130,33 @@ PoseCurvature probe_pose_curvature(Renderer& renderer, const Camera& camera, con
   return out;
 }
 
+Matrix6d pose_covariance(const PoseCurvature& c, int pixels, double max_std) {
+  if (!c.valid || pixels <= 0 || !(max_std > 0)) return Matrix6d::Zero();
+  const Eigen::LLT<Matrix6d> llt(c.metric);
+  if (llt.info() != Eigen::Success) return Matrix6d::Zero();
+  const Matrix6d L = llt.matrixL(), Linv = L.inverse();
+  // In whitened coordinates q = Lᵀ δ (|q| = RMS surface displacement): H_q = L⁻¹ H L⁻ᵀ.
+  const Matrix6d Hq = Linv * c.hessian * Linv.transpose();
+  const Eigen::SelfAdjointEigenSolver<Matrix6d> eig(0.5 * (Hq + Hq.transpose()));
+  if (eig.info() != Eigen::Success) return Matrix6d::Zero();
+  const double n = std::max(1.0, pixels / kCorrelatedPixels), residual = std::max(c.loss, 1e-9);
+  const double max_var = max_std * max_std;
+  Vector6d var;
+  for (int i = 0; i < 6; ++i) {
+    const double lambda = eig.eigenvalues()[i];
+    var[i] = lambda > 0 ? std::min(max_var, residual / (n * lambda)) : max_var;
+  }
+  const Matrix6d U = eig.eigenvectors();
+  const Matrix6d cov_q = U * var.asDiagonal() * U.transpose();
+  return Linv.transpose() * cov_q * Linv;  // δ = L⁻ᵀ q
+}
+
+Matrix6d covariance_at_origin(const Matrix6d& twist_covariance, const Eigen::Vector3d& pivot,
+                              const Eigen::Vector3d& origin) {
+  // The origin moves by v + w x (origin - pivot) = v - [origin - pivot]x w; the rotation is w.
+  Matrix6d J = Matrix6d::Identity();
+  J.topRightCorner<3, 3>() = -skew(origin - pivot);
+  return J * twist_covariance * J.transpose();
+}
+
 }  // namespace diffdope

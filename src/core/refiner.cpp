@@ -405,6 +405,8 @@ RefineResult RefineRun::finish(Renderer& renderer) {
   if (o.probe_distance > 0 && std::isfinite(res.loss.total))
     res.curvature = probe_pose_curvature(renderer, cam, mesh_, obs, loss_, res.pose, o.probe_distance,
                                          mesh_.symmetry.free_twists(res.pose, res.pose * mesh_.center()));
+  res.pivot = res.pose * mesh_.center();
+  res.covariance = pose_covariance(res.curvature, cv::countNonZero(rendered), mesh_.diameter());
   const size_t n = res.history.size(), tail = std::max<size_t>(2, n / 10);
   if (n >= tail) {
     const double a = res.history[n - tail], b = res.history.back();

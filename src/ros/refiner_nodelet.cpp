@@ -153,6 +153,7 @@ void RefinerNodelet::loadObjects() {
                     "object '" + slot->config.name + "' disabled: cannot load its mesh: " + e.what());
     }
     slot->pose_pub = pnh.advertise<geometry_msgs::PoseStamped>("refined/" + slot->config.name, 10);
+    slot->cov_pub = pnh.advertise<geometry_msgs::PoseWithCovarianceStamped>("refined_cov/" + slot->config.name, 10);
     slots_.push_back(std::move(slot));
   }
 }

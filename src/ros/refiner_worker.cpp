@@ -4,6 +4,7 @@
 #include <tf2/exceptions.h>
 
 #include <algorithm>
+#include <geometry_msgs/PoseWithCovarianceStamped.h>
 
 #include "diffdope_ros/conversions.hpp"
 #include "diffdope_ros/refiner_nodelet.hpp"
@@ -368,6 +369,16 @@ std::vector<diffdope_ros::RefinedPose> RefinerNodelet::refineAndPublish(
     out.push_back(p);
     if (!r.plausible && !publish_implausible_) continue;  // scores still go out in ~refined_poses
     s.pose_pub.publish(p.pose);
+    if (r.curvature.valid) {  // the pose with the covariance the loss's curvature gives (pose_curvature.hpp)
+      geometry_msgs::PoseWithCovarianceStamped c;
+      c.header = p.pose.header;
+      c.pose.pose = p.pose.pose;
+      const diffdope::Matrix6d cov =
+          diffdope::covariance_at_origin(r.covariance, r.pivot, (refined * inv_model).t);
+      for (int i = 0; i < 6; ++i)
+        for (int j = 0; j < 6; ++j) c.pose.covariance[size_t(6 * i + j)] = cov(i, j);
+      s.cov_pub.publish(c);
+    }
     if (s.last_tf_stamp == frame.header.stamp) continue;  // already on TF for this image: listeners keep the first
     s.last_tf_stamp = frame.header.stamp;
     geometry_msgs::TransformStamped t;

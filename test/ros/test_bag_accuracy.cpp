@@ -1,6 +1,7 @@
 // rostest (bag_accuracy.test): the refiner on the generated bag, judged against the bag's ground truth.
 #include <diagnostic_msgs/DiagnosticArray.h>
 #include <geometry_msgs/PoseStamped.h>
+#include <geometry_msgs/PoseWithCovarianceStamped.h>
 #include <sensor_msgs/Image.h>
 #include <visualization_msgs/MarkerArray.h>
 #include <gtest/gtest.h>
@@ -60,6 +61,11 @@ struct Recorder {
     std::lock_guard<std::mutex> l(mutex);
     per_object[name].push_back(*m);
   }
+  std::map<std::string, std::vector<geometry_msgs::PoseWithCovarianceStamped>> per_object_cov;
+  void onObjectCovariance(const geometry_msgs::PoseWithCovarianceStampedConstPtr& m, const std::string& name) {
+    std::lock_guard<std::mutex> l(mutex);
+    per_object_cov[name].push_back(*m);
+  }
 };
 
 // Parameters (private): the limits of PoseChecker::fromParams (max_translation, max_rotation_deg,
@@ -87,10 +93,14 @@ TEST(BagAccuracy, RefinedPosesTfAndScores) {
   auto truth_sub = nh.subscribe("/ground_truth", 100, &Recorder::onTruth, &rec);
   auto refined_sub = nh.subscribe("/diffdope_refiner/refined_poses", 100, &Recorder::onRefined, &rec);
   std::vector<ros::Subscriber> object_subs;
-  for (const auto& o : cfg.objects)
+  for (const auto& o : cfg.objects) {
     object_subs.push_back(nh.subscribe<geometry_msgs::PoseStamped>(
         "/diffdope_refiner/refined/" + o.name, 100,
         boost::bind(&Recorder::onObjectPose, &rec, boost::placeholders::_1, o.name)));
+    object_subs.push_back(nh.subscribe<geometry_msgs::PoseWithCovarianceStamped>(
+        "/diffdope_refiner/refined_cov/" + o.name, 100,
+        boost::bind(&Recorder::onObjectCovariance, &rec, boost::placeholders::_1, o.name)));
+  }
   ros::Subscriber overlay_sub, markers_sub, diag_sub;
   if (check_outputs) {  // subscribing is what turns the overlay and markers on
     overlay_sub = nh.subscribe("/diffdope_refiner/overlay", 2, &Recorder::onOverlay, &rec);
@@ -151,6 +161,23 @@ TEST(BagAccuracy, RefinedPosesTfAndScores) {
     // Every plausible refined pose also went out on ~refined/<name> and on TF.
     // (Looped: recording stops at an arbitrary moment, maybe between a frame's array and its per-object poses.)
     EXPECT_NEAR(int(rec.per_object[o.name].size()), s.plausible, looped ? 1 : 0);
+    // Each published pose also goes out with its covariance: the same pose, a symmetric matrix with positive
+    // variances (metres², radians²), none beyond what the object's size allows.
+    EXPECT_NEAR(int(rec.per_object_cov[o.name].size()), int(rec.per_object[o.name].size()), looped ? 1 : 0);
+    for (const auto& c : rec.per_object_cov[o.name]) {
+      for (int i = 0; i < 6; ++i) {
+        EXPECT_GT(c.pose.covariance[size_t(7 * i)], 0.0) << i;
+        for (int j = 0; j < 6; ++j)
+          EXPECT_NEAR(c.pose.covariance[size_t(6 * i + j)], c.pose.covariance[size_t(6 * j + i)], 1e-12);
+      }
+      EXPECT_LT(c.pose.covariance[0], 0.05) << "x variance (m^2)";
+    }
+    if (!rec.per_object_cov[o.name].empty()) {
+      const auto& k = rec.per_object_cov[o.name].back().pose.covariance;
+      std::printf("%s: covariance std x y z %.1f %.1f %.1f mm, rotation about x y z %.2f %.2f %.2f deg\n", o.name.c_str(),
+                  1e3 * std::sqrt(k[0]), 1e3 * std::sqrt(k[7]), 1e3 * std::sqrt(k[14]), std::sqrt(k[21]) * 180 / M_PI,
+                  std::sqrt(k[28]) * 180 / M_PI, std::sqrt(k[35]) * 180 / M_PI);
+    }
   }
   for (const auto& row : rec.checker->rows()) std::printf("%s\n", diffdope_ros::PoseChecker::formatRow(row).c_str());
   // max_step_deg > 0: an object's consecutive published poses turn by at most this much (the objects move a few

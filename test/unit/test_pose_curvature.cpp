@@ -1,0 +1,127 @@
+// The loss around a refined pose (pose_curvature.hpp): the probe's least curved direction and the covariance built
+// from it.
+#include <gtest/gtest.h>
+
+#include <Eigen/Geometry>
+#include <cmath>
+
+#include "diffdope/device.hpp"
+#include "diffdope/procedural.hpp"
+#include "diffdope/refiner.hpp"
+#include "diffdope/synthetic.hpp"
+
+using namespace diffdope;
+
+namespace {
+
+/// A texture of one colour: a plain object.
+Texture plain_texture() {
+  Texture t;
+  t.width = t.height = 4;
+  t.rgb.assign(3 * 16, 0.6f);
+  return t;
+}
+
+ObjectSymmetry about_z() {
+  ObjectSymmetry s;
+  s.continuous.push_back({Eigen::Vector3d::UnitZ(), Eigen::Vector3d::Zero()});
+  return s;
+}
+
+/// Standard deviation of the rotation about the unit `axis` (camera axes) in a twist covariance.
+double rotation_std(const Matrix6d& cov, const Eigen::Vector3d& axis) {
+  return std::sqrt(axis.dot(cov.bottomRightCorner<3, 3>() * axis));
+}
+
+}  // namespace
+
+TEST(PoseCurvature, TheWeakestDirectionOfAPlainCylinderIsItsAxisUnlessDeclared) {
+  // A plain (one-colour) cylinder: nothing in the image changes when it turns about its axis, so that is the
+  // direction the probe finds least curved and flat; declared symmetric, the probe looks elsewhere and finds a
+  // loss that rises.
+  const Camera cam{420, 420, 159.5, 119.5, 320, 240};
+  Mesh can = make_cylinder(0.035, 0.11, 64, plain_texture());
+  Vector6d d;
+  d << 0, 0, 0, 1.1, 0.3, 0.2;
+  const Pose truth(se3_exp(d).R, Eigen::Vector3d(0.01, 0.0, 0.45));
+  auto renderer = make_cpu_renderer();
+  const Observation obs = synthesize_observation(*renderer, cam, can, truth, SyntheticNoise(), 5);
+  const PoseCurvature free = probe_pose_curvature(*renderer, cam, can, obs, LossOptions(), truth, 0.01);
+  ASSERT_TRUE(free.valid);
+  const Eigen::Vector3d axis = truth.R.col(2);
+  const Eigen::Vector3d w = free.weakest_twist.tail<3>();
+  EXPECT_GT(std::abs(w.normalized().dot(axis)), 0.95) << w.transpose();
+  EXPECT_LT(std::abs(free.weakest_rise), 0.05);  // (64 facets: a turn shifts them a little)
+  // One metre of surface displacement along it (the metric's unit).
+  EXPECT_NEAR(std::sqrt(free.weakest_twist.dot(free.metric * free.weakest_twist)), 1.0, 1e-6);
+  can.symmetry = about_z();
+  const PoseCurvature declared = probe_pose_curvature(*renderer, cam, can, obs, LossOptions(), truth, 0.01,
+                                                      can.symmetry.free_twists(truth, truth * can.center()));
+  ASSERT_TRUE(declared.valid);
+  EXPECT_LT(std::abs(declared.weakest_twist.tail<3>().normalized().dot(axis)), 0.5);
+  EXPECT_GT(declared.weakest_rise, 4 * std::max(free.weakest_rise, 1e-3));
+}
+
+TEST(PoseCovariance, GrowsAboutAPlainCylindersAxis) {
+  // Nothing in the image changes when a plain cylinder turns about its axis: the covariance says so, and is
+  // capped there at the object's size; about a perpendicular axis the silhouette and depth pin it down.
+  const Camera cam{420, 420, 159.5, 119.5, 320, 240};
+  const Mesh can = make_cylinder(0.035, 0.11, 64, plain_texture());
+  Vector6d d;
+  d << 0, 0, 0, 1.1, 0.3, 0.2;
+  const Pose truth(se3_exp(d).R, Eigen::Vector3d(0.01, 0.0, 0.45));
+  auto renderer = make_cpu_renderer();
+  const Observation obs = synthesize_observation(*renderer, cam, can, truth, SyntheticNoise(), 5);
+  RefinerOptions o;
+  o.batch_size = 4;
+  o.iterations = 0;  // the truth itself
+  o.image_scale = 1.0;
+  o.explore_tolerance = 0;
+  const RefineResult r = Refiner(o).refine(cam, obs, can, truth);
+  ASSERT_TRUE(r.curvature.valid);
+  const Eigen::Vector3d axis = truth.R.col(2), across = truth.R.col(0);
+  const double about_axis = rotation_std(r.covariance, axis), about_across = rotation_std(r.covariance, across);
+  EXPECT_GT(about_axis, 10 * about_across) << about_axis << " vs " << about_across;
+  EXPECT_LT(about_across, 0.2);  // radians
+  EXPECT_GT(about_axis, 1.0);    // radians: unknown (up to the cap: a turn moving the surface by one diameter)
+  EXPECT_LT(about_axis, 6.0);
+  EXPECT_LT(std::sqrt(r.covariance(0, 0)), 0.01);  // metres
+  EXPECT_TRUE(r.covariance.isApprox(r.covariance.transpose(), 1e-9));
+}
+
+TEST(PoseCovariance, ADepthOnlyRefinementKnowsLessOfItsTurnInTheImagePlane) {
+  // An L-block seen by depth alone (no colour, no mask): its turn about the viewing ray shows only at its
+  // outline, against the full observation's print and mask.
+  const Camera cam{420, 420, 159.5, 119.5, 320, 240};
+  const Mesh block = make_l_block(0.12, make_label_texture(256, 31));
+  Vector6d d;
+  d << 0, 0, 0, 0.3, -0.2, 0.1;
+  const Pose truth(se3_exp(d).R, Eigen::Vector3d(0.01, -0.01, 0.55));
+  auto renderer = make_cpu_renderer();
+  const Observation full = synthesize_observation(*renderer, cam, block, truth, SyntheticNoise(), 2);
+  Observation depth_only;
+  depth_only.depth = full.depth;
+  RefinerOptions o;
+  o.batch_size = 4;
+  o.iterations = 0;
+  o.image_scale = 1.0;
+  o.explore_tolerance = 0;
+  const RefineResult a = Refiner(o).refine(cam, full, block, truth);
+  const RefineResult b = Refiner(o).refine(cam, depth_only, block, truth);
+  ASSERT_TRUE(a.curvature.valid);
+  ASSERT_TRUE(b.curvature.valid);
+  const Eigen::Vector3d ray = a.pivot.normalized();
+  EXPECT_GT(rotation_std(b.covariance, ray), 1.5 * rotation_std(a.covariance, ray))
+      << rotation_std(b.covariance, ray) << " vs " << rotation_std(a.covariance, ray);
+}
+
+TEST(PoseCovariance, AtTheOriginARotationAboutThePivotMovesTheOrigin) {
+  Matrix6d twist = Matrix6d::Zero();
+  twist(5, 5) = 0.01;  // 0.1 rad about the camera z axis, through the pivot
+  const Eigen::Vector3d pivot(0, 0, 0.5), origin(0.1, 0, 0.5);
+  const Matrix6d at = covariance_at_origin(twist, pivot, origin);
+  EXPECT_NEAR(at(1, 1), 0.01 * 0.1 * 0.1, 1e-12);  // the origin, 0.1 m off the axis, swings along y
+  EXPECT_NEAR(at(0, 0), 0.0, 1e-12);
+  EXPECT_NEAR(at(5, 5), 0.01, 1e-12);
+  EXPECT_NEAR(at(1, 5), 0.01 * 0.1, 1e-12);
+}
