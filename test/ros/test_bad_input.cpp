@@ -64,6 +64,20 @@ struct Node {
     std::lock_guard<std::mutex> l(mutex);
     if (!text.empty()) diagnostics_text = text;
   }
+  /// The latest diagnostics text once it contains `needle` (or after `timeout` seconds, whatever it is).
+  std::string waitForDiagnostics(const std::string& needle, double timeout = 15.0) {
+    const ros::WallTime start = ros::WallTime::now();
+    std::string text;
+    while ((ros::WallTime::now() - start).toSec() < timeout) {
+      {
+        std::lock_guard<std::mutex> l(mutex);
+        text = diagnostics_text;
+      }
+      if (text.find(needle) != std::string::npos) break;
+      ros::WallDuration(0.2).sleep();
+    }
+    return text;
+  }
   void onRefinedBox(const geometry_msgs::PoseStampedConstPtr& m) {
     std::lock_guard<std::mutex> l(mutex);
     ++refined_box_count;
@@ -116,16 +130,7 @@ Node* node = nullptr;
 
 // transport.test only (the node there asks for a depth transport that is not installed).
 TEST(BadInput, UnknownTransportIsAnErrorAtStart) {
-  const ros::WallTime start = ros::WallTime::now();
-  std::string text;
-  while ((ros::WallTime::now() - start).toSec() < 15) {
-    {
-      std::lock_guard<std::mutex> l(node->mutex);
-      text = node->diagnostics_text;
-    }
-    if (text.find("inputs: ") != std::string::npos) break;
-    ros::WallDuration(0.2).sleep();
-  }
+  const std::string text = node->waitForDiagnostics("inputs: ");
   EXPECT_NE(text.find("no input subscribed: ~depth_image_transport: 'nosuch' is not an installed image transport"),
             std::string::npos) << text;
   EXPECT_NE(text.find("installed: "), std::string::npos) << text;
@@ -138,16 +143,7 @@ TEST(BadInput, UnknownTransportIsAnErrorAtStart) {
 
 TEST(BadInput, BrokenMeshesDisableOnlyTheirObjects) {
   // Start-up errors may predate this test's /rosout subscription: diagnostics keep them.
-  const ros::WallTime start = ros::WallTime::now();
-  std::string text;
-  while ((ros::WallTime::now() - start).toSec() < 15) {
-    {
-      std::lock_guard<std::mutex> l(node->mutex);
-      text = node->diagnostics_text;
-    }
-    if (text.find("object ghost") != std::string::npos) break;
-    ros::WallDuration(0.2).sleep();
-  }
+  const std::string text = node->waitForDiagnostics("object ghost");
   EXPECT_NE(text.find("objects enabled: 1 of 3"), std::string::npos) << text;
   EXPECT_NE(text.find("object ghost: disabled"), std::string::npos) << text;
   EXPECT_NE(text.find("does_not_exist.ply"), std::string::npos) << text;
