@@ -1,0 +1,131 @@
+// Decoding DOPE's vision_msgs/Detection3DArray from its ROS 1 bytes (detection3d_array.hpp), written here by a
+// writer that follows the .msg definitions, including every kind of broken message.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstring>
+#include <limits>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "diffdope_ros/detection3d_array.hpp"
+
+using diffdope_ros::decode_detection3d_array;
+
+namespace {
+
+/// ROS 1 serialization, little-endian, as the .msg files define the fields.
+struct Writer {
+  std::vector<uint8_t> bytes;
+  template <class T>
+  void put(T v) {
+    const size_t at = bytes.size();
+    bytes.resize(at + sizeof(T));
+    std::memcpy(bytes.data() + at, &v, sizeof(T));
+  }
+  void str(const std::string& s) {
+    put<uint32_t>(uint32_t(s.size()));
+    bytes.insert(bytes.end(), s.begin(), s.end());
+  }
+  void header(uint32_t seq, uint32_t sec, uint32_t nsec, const std::string& frame) {
+    put<uint32_t>(seq), put<uint32_t>(sec), put<uint32_t>(nsec), str(frame);
+  }
+  void pose(double x, double y, double z, double qx, double qy, double qz, double qw) {
+    for (double v : {x, y, z, qx, qy, qz, qw}) put<double>(v);
+  }
+  void hypothesis(int64_t id, double score, double x, double qz, double qw) {
+    put<int64_t>(id), put<double>(score);
+    pose(x, 0.02, 0.6, 0, 0, qz, qw);
+    for (int i = 0; i < 36; ++i) put<double>(i % 7 == 0 ? 1e-4 : 0.0);  // PoseWithCovariance.covariance
+  }
+  void cloud(bool with_points) {
+    header(0, 0, 0, "");
+    put<uint32_t>(1), put<uint32_t>(with_points ? 1 : 0);  // height, width
+    put<uint32_t>(with_points ? 1 : 0);                     // fields
+    if (with_points) str("x"), put<uint32_t>(0), put<uint8_t>(7), put<uint32_t>(1);
+    put<uint8_t>(0), put<uint32_t>(4), put<uint32_t>(4);  // is_bigendian, point_step, row_step
+    put<uint32_t>(with_points ? 4 : 0);                     // data
+    for (int i = 0; i < (with_points ? 4 : 0); ++i) put<uint8_t>(uint8_t(i));
+    put<uint8_t>(1);  // is_dense
+  }
+};
+
+/// Two detections: class 1 (one hypothesis, with a point cloud) and class 3 (two hypotheses).
+std::vector<uint8_t> two_detections() {
+  Writer w;
+  w.header(7, 1000, 500, "camera_color_optical_frame");
+  w.put<uint32_t>(2);
+  w.header(7, 1000, 500, "camera_color_optical_frame");
+  w.put<uint32_t>(1);
+  w.hypothesis(1, 0.9, 0.1, 0, 1);
+  w.pose(0.1, 0.02, 0.6, 0, 0, 0, 1), w.put<double>(0.1), w.put<double>(0.05), w.put<double>(0.2);  // bbox
+  w.cloud(true);
+  w.header(7, 1000, 500, "camera_color_optical_frame");
+  w.put<uint32_t>(2);
+  w.hypothesis(3, 0.4, -0.1, std::sin(0.25), std::cos(0.25));
+  w.hypothesis(3, 0.7, -0.12, 0, 1);
+  w.pose(-0.1, 0.02, 0.6, 0, 0, 0, 1), w.put<double>(0.1), w.put<double>(0.1), w.put<double>(0.1);
+  w.cloud(false);
+  return w.bytes;
+}
+
+}  // namespace
+
+TEST(Detection3DArray, DecodesDopesLayout) {
+  const std::vector<uint8_t> b = two_detections();
+  const auto m = decode_detection3d_array(b.data(), b.size());
+  EXPECT_EQ(m.frame_id, "camera_color_optical_frame");
+  EXPECT_EQ(m.stamp_sec, 1000u);
+  EXPECT_EQ(m.stamp_nsec, 500u);
+  ASSERT_EQ(m.detections.size(), 2u);
+  ASSERT_EQ(m.detections[0].results.size(), 1u);
+  EXPECT_EQ(m.detections[0].results[0].class_id, 1);
+  EXPECT_DOUBLE_EQ(m.detections[0].results[0].score, 0.9);
+  EXPECT_DOUBLE_EQ(m.detections[0].results[0].pose.t.x(), 0.1);
+  EXPECT_DOUBLE_EQ(m.detections[0].results[0].covariance[0], 1e-4);
+  ASSERT_EQ(m.detections[1].results.size(), 2u);
+  EXPECT_EQ(m.detections[1].results[1].class_id, 3);
+  EXPECT_DOUBLE_EQ(m.detections[1].results[1].score, 0.7);
+  EXPECT_NEAR(diffdope::rotation_angle(m.detections[1].results[0].pose.R, Eigen::Matrix3d::Identity()), 0.5, 1e-12);
+  EXPECT_EQ(m.detections[1].frame_id, "camera_color_optical_frame");
+}
+
+TEST(Detection3DArray, EveryTruncationIsAnErrorNeverACrash) {
+  const std::vector<uint8_t> b = two_detections();
+  for (size_t n = 0; n < b.size(); ++n) {
+    try {
+      decode_detection3d_array(b.data(), n);
+      ADD_FAILURE() << "a message cut at " << n << " of " << b.size() << " bytes was accepted";
+    } catch (const std::invalid_argument& e) {
+      EXPECT_NE(std::string(e.what()).find("Detection3DArray: "), std::string::npos) << e.what();
+    }
+  }
+  std::vector<uint8_t> longer = b;
+  longer.push_back(0);
+  EXPECT_THROW(decode_detection3d_array(longer.data(), longer.size()), std::invalid_argument);
+}
+
+TEST(Detection3DArray, HostileCountsAndValuesAreRefusedByName) {
+  Writer w;
+  w.header(0, 1, 2, "cam");
+  w.put<uint32_t>(std::numeric_limits<uint32_t>::max());  // 4 billion detections in a few bytes
+  try {
+    decode_detection3d_array(w.bytes.data(), w.bytes.size());
+    ADD_FAILURE();
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("detections says 4294967295 elements"), std::string::npos) << e.what();
+  }
+  std::vector<uint8_t> b = two_detections();
+  // The first hypothesis's x: after the array header (4+4+4+4+26), the count (4), the detection header (42),
+  // the results count (4), id and score (16).
+  const size_t x_at = 42 + 4 + 42 + 4 + 16;
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  std::memcpy(b.data() + x_at, &nan, sizeof nan);
+  try {
+    decode_detection3d_array(b.data(), b.size());
+    ADD_FAILURE();
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("results.pose is not finite"), std::string::npos) << e.what();
+  }
+}
