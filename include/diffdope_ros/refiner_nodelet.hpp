@@ -11,6 +11,7 @@
 #include <geometry_msgs/PoseStamped.h>
 #include <geometry_msgs/PoseWithCovarianceStamped.h>
 #include <image_transport/image_transport.h>
+#include <topic_tools/shape_shifter.h>
 #include <image_transport/subscriber_filter.h>
 #include <message_filters/subscriber.h>
 #include <message_filters/sync_policies/approximate_time.h>
@@ -28,6 +29,7 @@
 #include <condition_variable>
 #include <deque>
 #include <future>
+#include <map>
 #include <memory>
 #include <mutex>
 #include <optional>
@@ -102,6 +104,8 @@ class RefinerNodelet : public nodelet::Nodelet {
                const sensor_msgs::ImageConstPtr& depth, const sensor_msgs::ImageConstPtr& mask);
   void onDetection(const geometry_msgs::PoseStampedConstPtr& msg, size_t slot);
   void onInitialPoses(const diffdope_ros::InitialPoseArrayConstPtr& msg);
+  /// DOPE's vision_msgs/Detection3DArray, read as a ShapeShifter (detection3d_array.hpp).
+  void onDetectionArray(const topic_tools::ShapeShifter::ConstPtr& msg);
   void storeDetection(const geometry_msgs::PoseStamped& pose, size_t slot, const std::string& origin);
   bool onRefineService(diffdope_ros::Refine::Request& req, diffdope_ros::Refine::Response& res);
   void onWatchdog(const ros::WallTimerEvent&);
@@ -146,6 +150,8 @@ class RefinerNodelet : public nodelet::Nodelet {
   double max_request_time_ = 10.0;
   diffdope::RefineTimeEstimator refine_time_;  // the worker's: learns from every refinement it times
   std::string frame_prefix_, fixed_frame_, detection_prefix_;
+  std::string detections_topic_;               // ~detections_topic: DOPE's Detection3DArray ("" = off)
+  std::map<std::string, int64_t> class_ids_;   // ~class_ids: object name -> DOPE class id
   diffdope::TrackOptions track_options_;
   diffdope::RefinerOptions refiner_options_;
   std::unique_ptr<diffdope::Refiner> refiner_;  // the worker's (null after a configuration error)
@@ -171,7 +177,10 @@ class RefinerNodelet : public nodelet::Nodelet {
   std::unique_ptr<message_filters::Synchronizer<Policy2>> sync2_;
   std::unique_ptr<message_filters::Synchronizer<Policy3>> sync3_;
   std::unique_ptr<message_filters::Synchronizer<Policy4>> sync4_;
-  ros::Subscriber initial_poses_sub_;
+  ros::Subscriber initial_poses_sub_, detection_array_sub_;
+  struct DetectionArrayCounts {
+    long received = 0, used = 0, malformed = 0, unknown_class = 0, extra_instances = 0;
+  } detection_array_counts_;  // under arrival_mutex_
   ros::ServiceServer refine_srv_;
   // The service has its own queue and thread: a call waiting for the worker holds none of the manager's
   // threads (which run this nodelet's inputs and every other nodelet in the manager).

@@ -2,6 +2,7 @@
 // The worker (refinement and publishing): refiner_worker.cpp; overlay and markers: refiner_visualization.cpp.
 // Parameters and topics: README.md ("ROS node").
 #include "diffdope_ros/refiner_nodelet.hpp"
+#include "diffdope_ros/detection3d_array.hpp"
 
 #include "diffdope/option_range.hpp"
 
@@ -79,6 +80,19 @@ void RefinerNodelet::loadParameters() {
   frame_prefix_ = pnh.param<std::string>("frame_prefix", "diffdope_");
   fixed_frame_ = pnh.param<std::string>("fixed_frame", "");
   detection_prefix_ = pnh.param<std::string>("detection_topic_prefix", "/dope/pose_");
+  detections_topic_ = pnh.param<std::string>("detections_topic", "");
+  XmlRpc::XmlRpcValue ids;
+  if (pnh.getParam("class_ids", ids)) {
+    // DOPE's own layout: {object name: class id}.
+    if (ids.getType() != XmlRpc::XmlRpcValue::TypeStruct) {
+      errors_.error("config", "~class_ids: expected a mapping of object names to DOPE class ids, e.g. {cracker: 1}");
+    } else {
+      for (auto& kv : ids) {
+        if (kv.second.getType() == XmlRpc::XmlRpcValue::TypeInt) class_ids_[kv.first] = static_cast<int>(kv.second);
+        else errors_.error("config", "~class_ids: the id of '" + kv.first + "' is not an integer: ignored");
+      }
+    }
+  }
   publish_tf_ = pnh.param("publish_tf", true);
   publish_implausible_ = pnh.param("publish_implausible", false);
   // on_request also seeds from its own previous results ("refine again" on a newer frame).
@@ -168,6 +182,14 @@ void RefinerNodelet::setupInputs() {
         topic, 5, boost::bind(&RefinerNodelet::onDetection, this, boost::placeholders::_1, i));
   }
   initial_poses_sub_ = pnh.subscribe("initial_poses", 5, &RefinerNodelet::onInitialPoses, this);
+  if (!detections_topic_.empty()) {
+    detection_array_sub_ = nh.subscribe<topic_tools::ShapeShifter>(detections_topic_, 5,
+                                                                   &RefinerNodelet::onDetectionArray, this);
+    for (const auto& slot : slots_)
+      if (!class_ids_.count(slot->config.name))
+        errors_.warn("class_ids", "object '" + slot->config.name + "' has no id in ~class_ids: " + detections_topic_ +
+                                      " cannot seed it");
+  }
 
   // Each image input has its own transport, as depth_image_proc does: a robot that records colour as
   // "compressed" needs "compressedDepth" (or raw) for depth, and a label mask must stay lossless.
@@ -374,6 +396,47 @@ void RefinerNodelet::storeDetection(const geometry_msgs::PoseStamped& pose, size
   slots_[slot]->pending_detection = pose;
 }
 
+void RefinerNodelet::onDetectionArray(const topic_tools::ShapeShifter::ConstPtr& msg) {
+  const auto count = [this](long DetectionArrayCounts::*field, long n) {
+    std::lock_guard<std::mutex> lock(arrival_mutex_);
+    detection_array_counts_.*field += n;
+  };
+  count(&DetectionArrayCounts::received, 1);
+  const std::string where = "~detections_topic " + detections_topic_ + ": ";
+  if (msg->getDataType() != kDetection3DArrayType || msg->getMD5Sum() != kDetection3DArrayMd5) {
+    count(&DetectionArrayCounts::malformed, 1);
+    errors_.error("detections", where + "a " + msg->getDataType() + " (MD5 " + msg->getMD5Sum() + "), expected " +
+                                    kDetection3DArrayType + " with MD5 " + kDetection3DArrayMd5 +
+                                    " (DOPE's, integer class ids): ignored");
+    return;
+  }
+  DecodedDetectionArray decoded;
+  try {
+    std::vector<uint8_t> bytes(msg->size());
+    ros::serialization::OStream out(bytes.data(), uint32_t(bytes.size()));
+    msg->write(out);
+    decoded = decode_detection3d_array(bytes.data(), bytes.size());
+  } catch (const std::exception& e) {
+    count(&DetectionArrayCounts::malformed, 1);
+    errors_.error("detections", where + e.what() + ": ignored");
+    return;
+  }
+  const DetectionSelection chosen = select_detections(decoded, class_ids_);
+  count(&DetectionArrayCounts::unknown_class, long(chosen.unknown_class_ids.size()));
+  count(&DetectionArrayCounts::extra_instances, chosen.extra_instances);
+  if (!chosen.unknown_class_ids.empty())
+    errors_.warn("class_ids", where + std::to_string(chosen.unknown_class_ids.size()) +
+                                  " detection(s) with a class id no object has in ~class_ids (first: " +
+                                  std::to_string(chosen.unknown_class_ids.front()) + ")");
+  for (const auto& [name, pose] : chosen.by_object) {
+    for (size_t i = 0; i < slots_.size(); ++i) {
+      if (slots_[i]->config.name != name) continue;
+      count(&DetectionArrayCounts::used, 1);
+      storeDetection(pose, i, where + "class id " + std::to_string(class_ids_.at(name)) + " ('" + name + "')");
+    }
+  }
+}
+
 bool RefinerNodelet::onRefineService(diffdope_ros::Refine::Request& req, diffdope_ros::Refine::Response& res) {
   auto job = std::make_shared<Request>();
   job->request = req;
@@ -464,6 +527,15 @@ void RefinerNodelet::onDiagnostics(diagnostic_updater::DiagnosticStatusWrapper& 
                    ", malformed " + std::to_string(c.malformed) + ", unmatched " +
                    std::to_string(std::max(0L, c.received - c.synchronized - c.malformed)));
     }
+  }
+  if (!detections_topic_.empty()) {
+    std::lock_guard<std::mutex> lock(arrival_mutex_);
+    const DetectionArrayCounts& c = detection_array_counts_;
+    stat.add("input detections (Detection3DArray)",
+             "received " + std::to_string(c.received) + ", used " + std::to_string(c.used) + ", malformed " +
+                 std::to_string(c.malformed) + ", unknown class ids " + std::to_string(c.unknown_class) +
+                 ", extra instances " + std::to_string(c.extra_instances) +
+                 " (instances of one object are not tracked yet: the highest score is used)");
   }
   stat.add("frames synchronized", s.frames_synced);
   stat.add("frames refined", s.frames_refined);
