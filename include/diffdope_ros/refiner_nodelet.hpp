@@ -106,6 +106,8 @@ class RefinerNodelet : public nodelet::Nodelet {
   void onInitialPoses(const diffdope_ros::InitialPoseArrayConstPtr& msg);
   /// DOPE's vision_msgs/Detection3DArray, read as a ShapeShifter (detection3d_array.hpp).
   void onDetectionArray(const topic_tools::ShapeShifter::ConstPtr& msg);
+  void subscribeDetectionArray();
+  std::atomic<bool> resubscribe_detections_{false};  // a publisher of another type was seen
   void storeDetection(const geometry_msgs::PoseStamped& pose, size_t slot, const std::string& origin);
   bool onRefineService(diffdope_ros::Refine::Request& req, diffdope_ros::Refine::Response& res);
   void onWatchdog(const ros::WallTimerEvent&);

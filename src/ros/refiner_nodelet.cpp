@@ -183,8 +183,7 @@ void RefinerNodelet::setupInputs() {
   }
   initial_poses_sub_ = pnh.subscribe("initial_poses", 5, &RefinerNodelet::onInitialPoses, this);
   if (!detections_topic_.empty()) {
-    detection_array_sub_ = nh.subscribe<topic_tools::ShapeShifter>(detections_topic_, 5,
-                                                                   &RefinerNodelet::onDetectionArray, this);
+    subscribeDetectionArray();
     for (const auto& slot : slots_)
       if (!class_ids_.count(slot->config.name))
         errors_.warn("class_ids", "object '" + slot->config.name + "' has no id in ~class_ids: " + detections_topic_ +
@@ -396,6 +395,12 @@ void RefinerNodelet::storeDetection(const geometry_msgs::PoseStamped& pose, size
   slots_[slot]->pending_detection = pose;
 }
 
+void RefinerNodelet::subscribeDetectionArray() {
+  detection_array_sub_.shutdown();
+  detection_array_sub_ = getNodeHandle().subscribe<topic_tools::ShapeShifter>(detections_topic_, 5,
+                                                                              &RefinerNodelet::onDetectionArray, this);
+}
+
 void RefinerNodelet::onDetectionArray(const topic_tools::ShapeShifter::ConstPtr& msg) {
   const auto count = [this](long DetectionArrayCounts::*field, long n) {
     std::lock_guard<std::mutex> lock(arrival_mutex_);
@@ -408,6 +413,9 @@ void RefinerNodelet::onDetectionArray(const topic_tools::ShapeShifter::ConstPtr&
     errors_.error("detections", where + "a " + msg->getDataType() + " (MD5 " + msg->getMD5Sum() + "), expected " +
                                     kDetection3DArrayType + " with MD5 " + kDetection3DArrayMd5 +
                                     " (DOPE's, integer class ids): ignored");
+    // A ROS 1 subscription keeps the type of the first publisher it connects to: subscribe afresh (from the
+    // watchdog, outside this callback) so that a publisher of the right type can still connect.
+    resubscribe_detections_ = true;
     return;
   }
   DecodedDetectionArray decoded;
@@ -456,6 +464,7 @@ bool RefinerNodelet::onRefineService(diffdope_ros::Refine::Request& req, diffdop
 }
 
 void RefinerNodelet::onWatchdog(const ros::WallTimerEvent&) {
+  if (resubscribe_detections_.exchange(false)) subscribeDetectionArray();
   // Inputs that arrive but never form a synchronized set (a silent topic, stamps too far apart) are an error.
   const ros::WallTime now = ros::WallTime::now();
   std::unique_lock<std::mutex> lock(arrival_mutex_);

@@ -9,13 +9,17 @@
 #include <rosgraph_msgs/Log.h>
 #include <sensor_msgs/CameraInfo.h>
 #include <sensor_msgs/Image.h>
+#include <topic_tools/shape_shifter.h>
 
 #include <mutex>
+#include <tuple>
 
 #include "diffdope_ros/InitialPoseArray.h"
 #include "diffdope_ros/Refine.h"
 #include "diffdope_ros/RefinedPoseArray.h"
+#include "detection3d_writer.hpp"
 #include "diffdope_ros/conversions.hpp"
+#include "diffdope_ros/detection3d_array.hpp"
 #include "diffdope_ros/pose_checker.hpp"
 
 namespace {
@@ -347,6 +351,86 @@ TEST(BadInput, QualityCheckDropsALostTrack) {
   EXPECT_LT(err.translation_m, 0.005);
   EXPECT_LT(err.rotation_rad, 2.0 * M_PI / 180);
 }
+
+TEST(BadInput, DopesDetectionArrayIsReadAndBadOnesAreReported) {
+  // DOPE's vision_msgs/Detection3DArray on ~detections_topic, as a ShapeShifter: another type on the topic, then
+  // broken bytes of the right type, each reported; then good arrays seed the box (class id 1), with a weaker
+  // second box and an unknown class id counted.
+  Node& n = *node;
+  const std::string topic = "/dope/detected_objects";
+  const auto connected = [](const ros::Publisher& p) {
+    const ros::WallTime start = ros::WallTime::now();
+    while (p.getNumSubscribers() == 0 && (ros::WallTime::now() - start).toSec() < 10) ros::WallDuration(0.05).sleep();
+    return p.getNumSubscribers() > 0;
+  };
+  {
+    ros::Publisher wrong = n.nh.advertise<geometry_msgs::PoseStamped>(topic, 5);
+    ASSERT_TRUE(connected(wrong));
+    wrong.publish(n.detection(n.truth_box, "camera_color_optical_frame"));
+    n.waitForError("a geometry_msgs/PoseStamped (MD5");
+    wrong.shutdown();  // the node then subscribes afresh (its subscription had taken the wrong type)
+  }
+  topic_tools::ShapeShifter shape;
+  shape.morph(diffdope_ros::kDetection3DArrayMd5, diffdope_ros::kDetection3DArrayType, "", "");
+  ros::Publisher pub = shape.advertise(n.nh, topic, 5);
+  ASSERT_TRUE(connected(pub));
+  const auto publish = [&](const std::vector<uint8_t>& bytes) {
+    topic_tools::ShapeShifter m;
+    m.morph(diffdope_ros::kDetection3DArrayMd5, diffdope_ros::kDetection3DArrayType, "", "");
+    std::vector<uint8_t> copy = bytes;
+    ros::serialization::IStream in(copy.data(), uint32_t(copy.size()));
+    m.read(in);
+    pub.publish(m);
+  };
+  const diffdope::Pose init =
+      diffdope::Pose(Eigen::AngleAxisd(3.0 * M_PI / 180, Eigen::Vector3d::UnitY()).toRotationMatrix(),
+                     Eigen::Vector3d(0.0, 0.005, 0)) * n.truth_box;
+  const auto array = [&](const ros::Time& stamp) {
+    diffdope_ros::test::Writer w;
+    w.header(0, stamp.sec, stamp.nsec, "camera_color_optical_frame");
+    w.put<uint32_t>(3);
+    const auto q = init.quaternion_xyzw();
+    for (const auto& [id, score, dx] : {std::tuple<int64_t, double, double>{1, 0.8, 0.0}, {1, 0.3, 0.2}, {9, 0.9, 0.0}}) {
+      w.header(0, stamp.sec, stamp.nsec, "camera_color_optical_frame");
+      w.put<uint32_t>(1);
+      w.hypothesis_at(id, score, init.t.x() + dx, init.t.y(), init.t.z(), q[0], q[1], q[2], q[3]);
+      w.box_and_empty_cloud();
+    }
+    return w.bytes;
+  };
+  std::vector<uint8_t> cut = array(ros::Time::now());
+  cut.resize(cut.size() - 10);
+  publish(cut);
+  n.waitForError("Detection3DArray: truncated");
+  int before;
+  {
+    std::lock_guard<std::mutex> l(n.mutex);
+    before = n.refined_box_count;
+  }
+  const ros::WallTime start = ros::WallTime::now();
+  while ((ros::WallTime::now() - start).toSec() < 40) {
+    publish(array(ros::Time::now()));
+    ros::WallDuration(0.2).sleep();
+    n.publishGood();
+    ros::WallDuration(1.0).sleep();
+    std::lock_guard<std::mutex> l(n.mutex);
+    if (n.refined_box_count > before) break;
+  }
+  const std::string text = n.waitForDiagnostics("extra instances 1");
+  const size_t line = text.find("input detections (Detection3DArray): ");
+  ASSERT_NE(line, std::string::npos) << text;
+  const std::string counts = text.substr(line, text.find('\n', line) - line);
+  EXPECT_EQ(counts.find("used 0,"), std::string::npos) << counts;
+  EXPECT_NE(counts.find("malformed 2,"), std::string::npos) << counts;  // the PoseStamped and the cut array
+  EXPECT_EQ(counts.find("unknown class ids 0,"), std::string::npos) << counts;
+  std::lock_guard<std::mutex> l(n.mutex);
+  ASSERT_GT(n.refined_box_count, before) << "no refined pose with detections from the array";
+  const auto err = diffdope_ros::pose_error(diffdope_ros::pose_from_msg(n.last_refined_box.pose, "refined"),
+                                            n.truth_box, false);
+  EXPECT_LT(err.translation_m, 0.005);
+  EXPECT_LT(err.rotation_rad, 2.0 * M_PI / 180);
+}
+
 
 bool loadGoodFrame(Node& n, const std::string& bag_path) {
   rosbag::Bag bag(bag_path, rosbag::bagmode::Read);

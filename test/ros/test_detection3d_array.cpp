@@ -9,47 +9,14 @@
 #include <string>
 #include <vector>
 
+#include "detection3d_writer.hpp"
 #include "diffdope_ros/detection3d_array.hpp"
 
 using diffdope_ros::decode_detection3d_array;
 
-namespace {
+using diffdope_ros::test::Writer;
 
-/// ROS 1 serialization, little-endian, as the .msg files define the fields.
-struct Writer {
-  std::vector<uint8_t> bytes;
-  template <class T>
-  void put(T v) {
-    const size_t at = bytes.size();
-    bytes.resize(at + sizeof(T));
-    std::memcpy(bytes.data() + at, &v, sizeof(T));
-  }
-  void str(const std::string& s) {
-    put<uint32_t>(uint32_t(s.size()));
-    bytes.insert(bytes.end(), s.begin(), s.end());
-  }
-  void header(uint32_t seq, uint32_t sec, uint32_t nsec, const std::string& frame) {
-    put<uint32_t>(seq), put<uint32_t>(sec), put<uint32_t>(nsec), str(frame);
-  }
-  void pose(double x, double y, double z, double qx, double qy, double qz, double qw) {
-    for (double v : {x, y, z, qx, qy, qz, qw}) put<double>(v);
-  }
-  void hypothesis(int64_t id, double score, double x, double qz, double qw) {
-    put<int64_t>(id), put<double>(score);
-    pose(x, 0.02, 0.6, 0, 0, qz, qw);
-    for (int i = 0; i < 36; ++i) put<double>(i % 7 == 0 ? 1e-4 : 0.0);  // PoseWithCovariance.covariance
-  }
-  void cloud(bool with_points) {
-    header(0, 0, 0, "");
-    put<uint32_t>(1), put<uint32_t>(with_points ? 1 : 0);  // height, width
-    put<uint32_t>(with_points ? 1 : 0);                     // fields
-    if (with_points) str("x"), put<uint32_t>(0), put<uint8_t>(7), put<uint32_t>(1);
-    put<uint8_t>(0), put<uint32_t>(4), put<uint32_t>(4);  // is_bigendian, point_step, row_step
-    put<uint32_t>(with_points ? 4 : 0);                     // data
-    for (int i = 0; i < (with_points ? 4 : 0); ++i) put<uint8_t>(uint8_t(i));
-    put<uint8_t>(1);  // is_dense
-  }
-};
+namespace {
 
 /// Two detections: class 1 (one hypothesis, with a point cloud) and class 3 (two hypotheses).
 std::vector<uint8_t> two_detections() {
