@@ -9,10 +9,6 @@
 #include <string>
 #include <vector>
 
-#include <geometry_msgs/PoseStamped.h>
-
-#include <map>
-
 #include "diffdope/pose.hpp"
 
 namespace diffdope_ros {
@@ -45,16 +41,5 @@ struct DecodedDetectionArray {
 /// Decodes one serialized message. Throws std::invalid_argument naming the field and byte offset: truncated
 /// data, a count or length larger than the bytes left, a non-finite or zero-length quaternion, trailing bytes.
 DecodedDetectionArray decode_detection3d_array(const uint8_t* data, size_t size);
-
-/// What a decoded array gives each object: every detection's best-scoring hypothesis, named through `class_ids`
-/// (object name -> DOPE class id, DOPE's own `class_ids` parameter); of several detections of one object, the
-/// highest score (instances of one object are not tracked yet); stamped and framed by the detection's header
-/// (the array's when the detection's frame is empty).
-struct DetectionSelection {
-  std::map<std::string, geometry_msgs::PoseStamped> by_object;
-  std::vector<int64_t> unknown_class_ids;  // detections whose class id no object has
-  int extra_instances = 0;                 // detections of an object that already had a better one
-};
-DetectionSelection select_detections(const DecodedDetectionArray& array, const std::map<std::string, int64_t>& class_ids);
 
 }  // namespace diffdope_ros

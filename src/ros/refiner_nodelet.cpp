@@ -2,7 +2,7 @@
 // The worker (refinement and publishing): refiner_worker.cpp; overlay and markers: refiner_visualization.cpp.
 // Parameters and topics: README.md ("ROS node").
 #include "diffdope_ros/refiner_nodelet.hpp"
-#include "diffdope_ros/detection3d_array.hpp"
+#include "diffdope_ros/detection_selection.hpp"
 
 #include "diffdope/option_range.hpp"
 

@@ -11,6 +11,8 @@
 #include <string>
 #include <vector>
 
+#include "../ros/detection3d_writer.hpp"
+
 #include "fuzz_common.hpp"
 
 namespace fs = std::filesystem;
@@ -148,6 +150,24 @@ void text_seeds(const std::string& repo) {
            pose + "}]}");
 }
 
+/// DOPE's Detection3DArray: one detection with two hypotheses, and one with a point cloud.
+void detection_seeds() {
+  diffdope_ros::test::Writer w;
+  w.header(1, 1000, 0, "camera_color_optical_frame");
+  w.put<uint32_t>(2);
+  w.header(1, 1000, 0, "camera_color_optical_frame");
+  w.put<uint32_t>(2);
+  w.hypothesis(1, 0.9, 0.1, 0, 1);
+  w.hypothesis(2, 0.4, -0.1, 0, 1);
+  w.box_and_empty_cloud();
+  w.header(1, 1000, 0, "");
+  w.put<uint32_t>(1);
+  w.hypothesis(3, 0.7, 0.0, 0, 1);
+  w.pose(0, 0, 0.5, 0, 0, 0, 1), w.put<double>(0.1), w.put<double>(0.1), w.put<double>(0.1);
+  w.cloud(true);
+  seed("detection3d_array", "two.bin", std::string(w.bytes.begin(), w.bytes.end()));
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -158,5 +178,6 @@ int main(int argc, char** argv) {
   out_dir = argv[1];
   mesh_seeds();
   text_seeds(argv[2]);
+  detection_seeds();
   return 0;
 }

@@ -10,7 +10,7 @@
 #include <vector>
 
 #include "detection3d_writer.hpp"
-#include "diffdope_ros/detection3d_array.hpp"
+#include "diffdope_ros/detection_selection.hpp"
 
 using diffdope_ros::decode_detection3d_array;
 

@@ -1,0 +1,40 @@
+// Which detection of a Detection3DArray seeds which object (detection_selection.hpp).
+#include "diffdope_ros/detection_selection.hpp"
+
+#include "diffdope_ros/conversions.hpp"
+
+namespace diffdope_ros {
+
+DetectionSelection select_detections(const DecodedDetectionArray& array,
+                                     const std::map<std::string, int64_t>& class_ids) {
+  DetectionSelection out;
+  std::map<std::string, double> best_score;
+  for (const DecodedDetection& d : array.detections) {
+    if (d.results.empty()) continue;
+    const DecodedHypothesis* h = &d.results.front();
+    for (const DecodedHypothesis& r : d.results)
+      if (r.score > h->score) h = &r;
+    std::string name;
+    for (const auto& [object, id] : class_ids)
+      if (id == h->class_id) name = object;
+    if (name.empty()) {
+      out.unknown_class_ids.push_back(h->class_id);
+      continue;
+    }
+    auto seen = best_score.find(name);
+    if (seen != best_score.end()) {
+      ++out.extra_instances;
+      if (h->score <= seen->second) continue;
+    }
+    best_score[name] = h->score;
+    geometry_msgs::PoseStamped p;
+    const bool own = !d.frame_id.empty();
+    p.header.frame_id = own ? d.frame_id : array.frame_id;
+    p.header.stamp = own ? ros::Time(d.stamp_sec, d.stamp_nsec) : ros::Time(array.stamp_sec, array.stamp_nsec);
+    p.pose = pose_to_msg(h->pose);
+    out.by_object[name] = p;
+  }
+  return out;
+}
+
+}  // namespace diffdope_ros
