@@ -353,8 +353,8 @@ TEST(BadInput, QualityCheckDropsALostTrack) {
 }
 
 TEST(BadInput, DopesDetectionArrayIsReadAndBadOnesAreReported) {
-  // DOPE's vision_msgs/Detection3DArray on ~detections_topic, as a ShapeShifter: another type on the topic, then
-  // broken bytes of the right type, each reported; then good arrays seed the box (class id 1), with a weaker
+  // DOPE's vision_msgs/Detection3DArray on ~detections_topic, as a ShapeShifter: the newer layout (another MD5),
+  // then broken bytes of the right one, each reported; then good arrays seed the box (class id 1), with a weaker
   // second box and an unknown class id counted.
   Node& n = *node;
   const std::string topic = "/dope/detected_objects";
@@ -364,11 +364,17 @@ TEST(BadInput, DopesDetectionArrayIsReadAndBadOnesAreReported) {
     return p.getNumSubscribers() > 0;
   };
   {
-    ros::Publisher wrong = n.nh.advertise<geometry_msgs::PoseStamped>(topic, 5);
+    // The newer vision_msgs layout (string class ids): same type name, another MD5.
+    topic_tools::ShapeShifter newer;
+    newer.morph("ce4a6fa9e38b86b8d286a82799ca586d", diffdope_ros::kDetection3DArrayType, "", "");
+    ros::Publisher wrong = newer.advertise(n.nh, topic, 5);
     ASSERT_TRUE(connected(wrong));
-    wrong.publish(n.detection(n.truth_box, "camera_color_optical_frame"));
-    n.waitForError("a geometry_msgs/PoseStamped (MD5");
-    wrong.shutdown();  // the node then subscribes afresh (its subscription had taken the wrong type)
+    std::vector<uint8_t> some(64, 0);
+    ros::serialization::IStream in(some.data(), uint32_t(some.size()));
+    newer.read(in);
+    wrong.publish(newer);
+    n.waitForError("a vision_msgs/Detection3DArray (MD5 ce4a6fa9e38b86b8d286a82799ca586d)");
+    wrong.shutdown();  // the node then subscribes afresh (its subscription had taken the other MD5)
   }
   topic_tools::ShapeShifter shape;
   shape.morph(diffdope_ros::kDetection3DArrayMd5, diffdope_ros::kDetection3DArrayType, "", "");
@@ -421,7 +427,7 @@ TEST(BadInput, DopesDetectionArrayIsReadAndBadOnesAreReported) {
   ASSERT_NE(line, std::string::npos) << text;
   const std::string counts = text.substr(line, text.find('\n', line) - line);
   EXPECT_EQ(counts.find("used 0,"), std::string::npos) << counts;
-  EXPECT_NE(counts.find("malformed 2,"), std::string::npos) << counts;  // the PoseStamped and the cut array
+  EXPECT_NE(counts.find("malformed 2,"), std::string::npos) << counts;  // the other layout and the cut array
   EXPECT_EQ(counts.find("unknown class ids 0,"), std::string::npos) << counts;
   std::lock_guard<std::mutex> l(n.mutex);
   ASSERT_GT(n.refined_box_count, before) << "no refined pose with detections from the array";
