@@ -11,6 +11,7 @@
 #include <sensor_msgs/Image.h>
 #include <topic_tools/shape_shifter.h>
 
+#include <functional>
 #include <mutex>
 #include <tuple>
 
@@ -122,6 +123,25 @@ struct Node {
     }
   }
   void publishGood() { publishSet(good_rgb, good_info, good_depth, good_mask); }
+  /// Publishes a seed (`seed()`) and then a good frame until more than `before` refined boxes have arrived (up
+  /// to `timeout` seconds); then the last one must be within 5 mm / 2 degrees of the truth.
+  void refineBoxFrom(int before, const std::function<void()>& seed, const std::string& what, double timeout = 40) {
+    const ros::WallTime start = ros::WallTime::now();
+    while ((ros::WallTime::now() - start).toSec() < timeout) {
+      seed();
+      ros::WallDuration(0.2).sleep();
+      publishGood();
+      ros::WallDuration(1.0).sleep();
+      std::lock_guard<std::mutex> l(mutex);
+      if (refined_box_count > before) break;
+    }
+    std::lock_guard<std::mutex> l(mutex);
+    ASSERT_GT(refined_box_count, before) << what;
+    const auto err = diffdope_ros::pose_error(diffdope_ros::pose_from_msg(last_refined_box.pose, "refined"),
+                                              truth_box, false);
+    EXPECT_LT(err.translation_m, 0.005);
+    EXPECT_LT(err.rotation_rad, 2.0 * M_PI / 180);
+  }
   geometry_msgs::PoseStamped detection(const diffdope::Pose& p, const std::string& frame) {
     geometry_msgs::PoseStamped d;
     d.header.stamp = ros::Time::now();
@@ -285,21 +305,8 @@ TEST(BadInput, StillRefinesAGoodFrameAfterwards) {
   const diffdope::Pose init =
       diffdope::Pose(Eigen::AngleAxisd(3.0 * M_PI / 180, Eigen::Vector3d::UnitX()).toRotationMatrix(),
                      Eigen::Vector3d(0.006, 0, 0)) * n.truth_box;
-  const ros::WallTime start = ros::WallTime::now();
-  while ((ros::WallTime::now() - start).toSec() < 40) {
-    n.det_box.publish(n.detection(init, "camera_color_optical_frame"));
-    ros::WallDuration(0.2).sleep();
-    n.publishGood();
-    ros::WallDuration(1.0).sleep();
-    std::lock_guard<std::mutex> l(n.mutex);
-    if (n.refined_box_count > 0) break;
-  }
-  std::lock_guard<std::mutex> l(n.mutex);
-  ASSERT_GT(n.refined_box_count, 0) << "no refined pose for a good frame after the bad input";
-  const auto err = diffdope_ros::pose_error(diffdope_ros::pose_from_msg(n.last_refined_box.pose, "refined"),
-                                            n.truth_box, false);
-  EXPECT_LT(err.translation_m, 0.005);
-  EXPECT_LT(err.rotation_rad, 2.0 * M_PI / 180);
+  n.refineBoxFrom(0, [&] { n.det_box.publish(n.detection(init, "camera_color_optical_frame")); },
+                  "no refined pose for a good frame after the bad input");
 }
 
 TEST(BadInput, QualityCheckDropsALostTrack) {
@@ -333,23 +340,11 @@ TEST(BadInput, QualityCheckDropsALostTrack) {
   ip.name = "box";
   ip.pose = n.detection(n.truth_box, "camera_color_optical_frame");
   a.poses.push_back(ip);
-  const ros::WallTime start = ros::WallTime::now();
-  while ((ros::WallTime::now() - start).toSec() < 30) {
+  n.refineBoxFrom(before, [&] {
     ip.pose.header.stamp = ros::Time::now();
     a.poses[0] = ip;
     n.initial_poses.publish(a);
-    ros::WallDuration(0.2).sleep();
-    n.publishGood();
-    ros::WallDuration(1.0).sleep();
-    std::lock_guard<std::mutex> l(n.mutex);
-    if (n.refined_box_count > before) break;
-  }
-  std::lock_guard<std::mutex> l(n.mutex);
-  ASSERT_GT(n.refined_box_count, before) << "~initial_poses did not re-acquire the object";
-  const auto err = diffdope_ros::pose_error(diffdope_ros::pose_from_msg(n.last_refined_box.pose, "refined"),
-                                            n.truth_box, false);
-  EXPECT_LT(err.translation_m, 0.005);
-  EXPECT_LT(err.rotation_rad, 2.0 * M_PI / 180);
+  }, "~initial_poses did not re-acquire the object", 30);
 }
 
 TEST(BadInput, DopesDetectionArrayIsReadAndBadOnesAreReported) {
@@ -413,15 +408,7 @@ TEST(BadInput, DopesDetectionArrayIsReadAndBadOnesAreReported) {
     std::lock_guard<std::mutex> l(n.mutex);
     before = n.refined_box_count;
   }
-  const ros::WallTime start = ros::WallTime::now();
-  while ((ros::WallTime::now() - start).toSec() < 40) {
-    publish(array(ros::Time::now()));
-    ros::WallDuration(0.2).sleep();
-    n.publishGood();
-    ros::WallDuration(1.0).sleep();
-    std::lock_guard<std::mutex> l(n.mutex);
-    if (n.refined_box_count > before) break;
-  }
+  n.refineBoxFrom(before, [&] { publish(array(ros::Time::now())); }, "no refined pose with detections from the array");
   const std::string text = n.waitForDiagnostics("extra instances 1");
   const size_t line = text.find("input detections (Detection3DArray): ");
   ASSERT_NE(line, std::string::npos) << text;
@@ -429,12 +416,6 @@ TEST(BadInput, DopesDetectionArrayIsReadAndBadOnesAreReported) {
   EXPECT_EQ(counts.find("used 0,"), std::string::npos) << counts;
   EXPECT_NE(counts.find("malformed 2,"), std::string::npos) << counts;  // the other layout and the cut array
   EXPECT_EQ(counts.find("unknown class ids 0,"), std::string::npos) << counts;
-  std::lock_guard<std::mutex> l(n.mutex);
-  ASSERT_GT(n.refined_box_count, before) << "no refined pose with detections from the array";
-  const auto err = diffdope_ros::pose_error(diffdope_ros::pose_from_msg(n.last_refined_box.pose, "refined"),
-                                            n.truth_box, false);
-  EXPECT_LT(err.translation_m, 0.005);
-  EXPECT_LT(err.rotation_rad, 2.0 * M_PI / 180);
 }
 
 
