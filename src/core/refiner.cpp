@@ -21,16 +21,12 @@
 namespace diffdope {
 
 Pose refiner_step(const Pose& pose, const Vector6d& g, double lr, double diameter, const Eigen::Vector3d& pivot) {
-  // The renderer's gradient is w.r.t. (rho, phi) about the camera origin; about the pivot p the rotation
-  // gradient is g_phi - p x g_rho (see pose.hpp for the update's first order).
-  const Eigen::Vector3d g_rho = g.head<3>();
-  const Eigen::Vector3d g_omega = g.tail<3>() - pivot.cross(g_rho);
-  const Eigen::Vector3d v = -lr * diameter * diameter * g_rho;
-  const Eigen::Vector3d w = -lr * 4.0 * g_omega;
-  const Eigen::Matrix3d Rw = so3_exp(w);
-  Pose out(Rw * pose.R, Rw * (pose.t - pivot) + pivot + v);
-  out.orthonormalize();
-  return out;
+  // A twist about the pivot against the gradient, translation scaled by diameter^2 and rotation by 4.
+  const Vector6d g_pivot = gradient_about(g, pivot);
+  Vector6d step;
+  step.head<3>() = -lr * diameter * diameter * g_pivot.head<3>();
+  step.tail<3>() = -lr * 4.0 * g_pivot.tail<3>();
+  return twist_about(pose, step, pivot);
 }
 
 Refiner::Refiner(const RefinerOptions& options) : options_(options) {
@@ -519,10 +515,6 @@ std::vector<RefineResult> Refiner::refine_all(const Camera& camera, const Observ
   }
   return out;
 }
-
-}  // namespace diffdope
-
-namespace diffdope {
 
 long planned_evaluations(const RefinerOptions& o) {
   long total = 0;

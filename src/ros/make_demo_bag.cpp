@@ -349,10 +349,16 @@ int main(int argc, char** argv) {
       yaml << "  - name: " << o.name << "\n    mesh: " << yaml_quote("meshes/" + o.name + ".ply")
            << "\n    mesh_scale: 1\n    symmetric: " << (o.symmetric ? "true" : "false")
            << "\n    mask_label: " << o.label << "\n";
-      for (const ObjectSymmetry::Axis& a : o.declared.continuous)
-        yaml << "    symmetries: {continuous: [{axis: [" << a.direction.x() << ", " << a.direction.y() << ", "
-             << a.direction.z() << "], offset: [" << a.offset.x() << ", " << a.offset.y() << ", " << a.offset.z()
-             << "]}]}\n";
+      if (!o.declared.continuous.empty()) {
+        yaml << "    symmetries: {continuous: [";
+        for (size_t k = 0; k < o.declared.continuous.size(); ++k) {
+          const ObjectSymmetry::Axis& a = o.declared.continuous[k];
+          yaml << (k ? ", " : "") << "{axis: [" << a.direction.x() << ", " << a.direction.y() << ", "
+               << a.direction.z() << "], offset: [" << a.offset.x() << ", " << a.offset.y() << ", " << a.offset.z()
+               << "]}";
+        }
+        yaml << "]}\n";
+      }
     }
     const std::string yaml_path = (out_dir / "objects.yaml").string();
     {
