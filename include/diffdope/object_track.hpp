@@ -69,6 +69,11 @@ class ObjectTrack {
   /// between frames even when a fresh detection does; without a track, the canonical one (symmetry.hpp).
   Pose reported_pose(const Pose& refined, const ObjectSymmetry& symmetry) const;
 
+  /// New options from the next call on (runtime tuning); the track and any unused detection are kept, and
+  /// judged by the new ages. Validates them (throws std::invalid_argument, leaving the old ones).
+  void set_options(const TrackOptions& options) { options_ = (options.validate(), options); }
+  const TrackOptions& options() const { return options_; }
+
   bool tracking() const { return track_.has_value(); }
   /// Whether the track can still seed a frame stamped `now` (not timed out).
   bool tracking(double now) const;

@@ -155,6 +155,10 @@ class Refiner {
   /// With a renderer of the caller's choosing (options.device is then not used).
   Refiner(const RefinerOptions& options, std::unique_ptr<Renderer> renderer);
   const RefinerOptions& options() const { return options_; }
+  /// New options for the next calls, keeping the renderer and what it caches (levels of detail, uploaded meshes,
+  /// textures): runtime tuning and per-call overrides. Validates them; `device` and `render` must be unchanged
+  /// (they build the renderer: a new Refiner is needed). Throws std::invalid_argument, leaving the old options.
+  void set_options(const RefinerOptions& options);
   /// The backend in use ("cpu" or "cuda").
   std::string backend() const { return renderer_->name(); }
 

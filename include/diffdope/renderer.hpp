@@ -38,6 +38,8 @@ struct RenderOptions {
   /// Throws std::invalid_argument naming the first field that is not finite or outside its range.
   void validate() const;
 };
+bool operator==(const RenderOptions& a, const RenderOptions& b);
+inline bool operator!=(const RenderOptions& a, const RenderOptions& b) { return !(a == b); }
 
 /// Loss weights and robustness constants. Each term is a mean, so values (and gradients, per metre/radian) do
 /// not depend on the image resolution:

@@ -8,6 +8,7 @@
 // Parameters and topics: README.md ("ROS node").
 #include <cv_bridge/cv_bridge.h>
 #include <diagnostic_updater/diagnostic_updater.h>
+#include <dynamic_reconfigure/server.h>
 #include <geometry_msgs/PoseStamped.h>
 #include <geometry_msgs/PoseWithCovarianceStamped.h>
 #include <image_transport/image_transport.h>
@@ -45,6 +46,7 @@
 #include "diffdope_ros/RefinedPoseArray.h"
 #include "diffdope_ros/checked_input.hpp"
 #include "diffdope_ros/error_reporter.hpp"
+#include "diffdope_ros/runtime_settings.hpp"
 
 namespace diffdope_ros {
 
@@ -54,7 +56,7 @@ class RefinerNodelet : public nodelet::Nodelet {
   ~RefinerNodelet() override;  // explicit teardown order: worker, timers, filters, synchronizers
 
  private:
-  enum class Mode { kContinuous, kTracking, kOnRequest };
+  using Mode = StreamMode;
 
   /// One synchronized input set. The callback checks it (encodings, sizes, camera_info) and hands the messages
   /// over; the worker converts the pixels (convertFrame), so frames it skips cost the callbacks nothing.
@@ -110,11 +112,16 @@ class RefinerNodelet : public nodelet::Nodelet {
   std::atomic<bool> resubscribe_detections_{false};  // a publisher of another type was seen
   void storeDetection(const geometry_msgs::PoseStamped& pose, size_t slot, const std::string& origin);
   bool onRefineService(diffdope_ros::Refine::Request& req, diffdope_ros::Refine::Response& res);
+  /// dynamic_reconfigure: validates the new values (a refused set reverts `config`) and hands them to the worker.
+  void onReconfigure(RefinerConfig& config, uint32_t level);
+  void setupReconfigure();
   void onWatchdog(const ros::WallTimerEvent&);
   void onDiagnostics(diagnostic_updater::DiagnosticStatusWrapper& stat);
 
   // Worker thread.
   void workerLoop();
+  /// Takes reconfigured settings, if any, into the refiner, the tracks and the publishing choices.
+  void applyPendingSettings();
   /// Converts the frame's pixels once. Throws std::invalid_argument like the conversions.
   void convertFrame(Frame& frame);
   void reportInputError(const std::exception& e);
@@ -142,8 +149,9 @@ class RefinerNodelet : public nodelet::Nodelet {
   void publishMarkers(const Frame& frame, const std::vector<size_t>& slots,
                       const std::vector<diffdope::RefineResult>& results);
 
-  // Parameters.
-  Mode mode_ = Mode::kTracking;
+  // Parameters. The worker's copies (refiner_options_, track_options_, publish_implausible_) change only in
+  // applyPendingSettings(); mode_ is read by the input callbacks too.
+  std::atomic<Mode> mode_{Mode::kTracking};
   bool use_depth_ = true, use_mask_ = false, publish_tf_ = true, publish_implausible_ = false;
   int queue_size_ = 10;
   std::string parameter_error_;  // a parameter outside its range (loadParameters): no object is refined
@@ -158,6 +166,14 @@ class RefinerNodelet : public nodelet::Nodelet {
   diffdope::RefinerOptions refiner_options_;
   std::unique_ptr<diffdope::Refiner> refiner_;  // the worker's (null after a configuration error)
   std::unique_ptr<diffdope::Renderer> overlay_renderer_;  // the worker's, for ~overlay
+
+  // Runtime tuning (cfg/Refiner.cfg). The callback thread owns runtime_settings_ / applied_config_ (the last
+  // accepted values); the worker takes pending_settings_ (work_mutex_) at its next job.
+  boost::recursive_mutex reconfigure_mutex_;
+  std::unique_ptr<dynamic_reconfigure::Server<RefinerConfig>> reconfigure_server_;
+  RuntimeSettings runtime_settings_;
+  RefinerConfig applied_config_;
+  std::optional<RuntimeSettings> pending_settings_;
 
   ErrorReporter errors_;
   std::vector<std::unique_ptr<Slot>> slots_;

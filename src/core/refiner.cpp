@@ -43,6 +43,16 @@ Refiner::Refiner(const RefinerOptions& options, std::unique_ptr<Renderer> render
   if (!renderer_) throw std::invalid_argument("Refiner: no renderer");
 }
 
+void Refiner::set_options(const RefinerOptions& options) {
+  options.validate();
+  if (options.device != options_.device)
+    throw std::invalid_argument("device cannot change on a running refiner ('" + options_.device + "' -> '" +
+                                options.device + "'): it needs a new Refiner");
+  if (options.render != options_.render)
+    throw std::invalid_argument("render options cannot change on a running refiner: they need a new Refiner");
+  options_ = options;
+}
+
 namespace {
 
 Camera scaled_camera(const Camera& camera, double scale) { return scale == 1.0 ? camera : camera.scaled(scale); }

@@ -171,6 +171,12 @@ void RenderOptions::validate() const {
   check("render.threads", threads, 0, kMaxThreads, " (0: all cores)");
 }
 
+bool operator==(const RenderOptions& a, const RenderOptions& b) {
+  return a.cull_back_faces == b.cull_back_faces && a.auto_cull_closed == b.auto_cull_closed &&
+         a.near_plane == b.near_plane && a.roi_margin == b.roi_margin && a.use_roi == b.use_roi &&
+         a.lod_pixel_error == b.lod_pixel_error && a.threads == b.threads;
+}
+
 void LossOptions::validate() const {
   const OptionRange check{"loss options"};
   check("loss.weight_rgb", weight_rgb, 0, kMaxWeight);

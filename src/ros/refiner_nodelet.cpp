@@ -42,6 +42,7 @@ void RefinerNodelet::onInit() {
   diagnostics_->setHardwareID("diffdope_refiner");
   diagnostics_->add("refiner", this, &RefinerNodelet::onDiagnostics);
 
+  setupReconfigure();
   worker_ = std::thread([this] { workerLoop(); });
   setupInputs();
   // The service runs on its own queue and thread: a call waits for the worker without holding up the inputs or
@@ -53,7 +54,7 @@ void RefinerNodelet::onInit() {
   service_spinner_->start();
   watchdog_timer_ = pnh.createWallTimer(ros::WallDuration(1.0), &RefinerNodelet::onWatchdog, this);
   NODELET_INFO_STREAM("diffdope refiner ready: mode "
-                      << (mode_ == Mode::kOnRequest ? "on_request" : mode_ == Mode::kTracking ? "tracking" : "continuous")
+                      << to_string(mode_)
                       << ", inputs rgb" << (use_depth_ ? "+depth" : "") << (use_mask_ ? "+mask" : "")
                       << ", " << slots_.size() << " object(s), " << refiner_options_.batch_size << " runs x "
                       << refiner_options_.iterations << " iterations, backend "
@@ -62,12 +63,10 @@ void RefinerNodelet::onInit() {
 
 void RefinerNodelet::loadParameters() {
   ros::NodeHandle& pnh = getPrivateNodeHandle();
-  std::string mode = pnh.param<std::string>("mode", "tracking");
-  if (mode == "continuous") mode_ = Mode::kContinuous;
-  else if (mode == "tracking") mode_ = Mode::kTracking;
-  else if (mode == "on_request") mode_ = Mode::kOnRequest;
-  else {
-    NODELET_ERROR_STREAM("~mode: unknown value '" << mode << "' (continuous, tracking, on_request); using tracking");
+  try {
+    mode_ = parse_stream_mode(pnh.param<std::string>("mode", "tracking"));
+  } catch (const std::invalid_argument& e) {
+    NODELET_ERROR_STREAM("~" << e.what() << "; using tracking");
     mode_ = Mode::kTracking;
   }
   use_depth_ = pnh.param("use_depth", true);
@@ -133,8 +132,14 @@ void RefinerNodelet::loadObjects() {
     refiner_options_ = cfg.refiner;
     // The optional refiner file overrides the objects file's refiner section (launch-time tuning).
     if (!refiner_path.empty()) refiner_options_ = diffdope::RefinerOptions::from_yaml_file(refiner_path, cfg.refiner);
-    if (pnh.hasParam("iterations")) refiner_options_.iterations = pnh.param("iterations", refiner_options_.iterations);
-    if (pnh.hasParam("batch_size")) refiner_options_.batch_size = pnh.param("batch_size", refiner_options_.batch_size);
+    // Then the ~parameters of the runtime settings (cfg/Refiner.cfg: iterations, image_scale, loss weights...),
+    // checked as the YAML's are.
+    RefinerConfig launch = to_config({mode_, refiner_options_, track_options_, publish_implausible_});
+    launch.__fromServer__(pnh);
+    launch.mode = to_string(mode_);  // (read above, with its own message)
+    const RuntimeSettings settings = from_config(launch, {mode_, refiner_options_, track_options_, publish_implausible_});
+    refiner_options_ = settings.refiner;
+    track_options_ = settings.track;
     const std::string device = pnh.param<std::string>("device", "");  // "" = the YAML's choice
     if (!device.empty()) refiner_options_.device = device;
     refiner_options_.validate();
@@ -170,6 +175,40 @@ void RefinerNodelet::loadObjects() {
     slot->cov_pub = pnh.advertise<geometry_msgs::PoseWithCovarianceStamped>("refined_cov/" + slot->config.name, 10);
     slots_.push_back(std::move(slot));
   }
+}
+
+void RefinerNodelet::setupReconfigure() {
+  runtime_settings_ = {mode_, refiner_options_, track_options_, publish_implausible_};
+  applied_config_ = to_config(runtime_settings_);
+  // The server starts from the node's own values (YAML, then ~parameters), not from the .cfg defaults.
+  reconfigure_server_ =
+      std::make_unique<dynamic_reconfigure::Server<RefinerConfig>>(reconfigure_mutex_, getPrivateNodeHandle());
+  reconfigure_server_->updateConfig(applied_config_);
+  reconfigure_server_->setCallback(
+      boost::bind(&RefinerNodelet::onReconfigure, this, boost::placeholders::_1, boost::placeholders::_2));
+}
+
+void RefinerNodelet::onReconfigure(RefinerConfig& config, uint32_t level) {
+  RuntimeSettings settings;
+  try {
+    settings = from_config(config, runtime_settings_);
+  } catch (const std::invalid_argument& e) {
+    errors_.error("reconfigure", std::string("reconfigure refused, the previous values stay: ") + e.what());
+    config = applied_config_;  // the server publishes what is in force
+    return;
+  }
+  runtime_settings_ = settings;
+  applied_config_ = config;
+  if (level == ~0u) return;  // setCallback's first call: the values the node started with
+  {
+    std::lock_guard<std::mutex> lock(work_mutex_);
+    pending_settings_ = settings;
+  }
+  mode_ = settings.mode;  // the input callbacks read it; the rest the worker takes at its next job
+  NODELET_INFO_STREAM("reconfigured: mode " << to_string(settings.mode) << ", " << settings.refiner.batch_size
+                                            << " runs x " << settings.refiner.iterations
+                                            << " iterations, image scale " << settings.refiner.image_scale
+                                            << " (from the next frame)");
 }
 
 void RefinerNodelet::setupInputs() {

@@ -27,6 +27,7 @@ void RefinerNodelet::workerLoop() {
         frame_pending_ = false;
       }
     }
+    applyPendingSettings();
     auto answer_failure = [&job](const std::string& why) {  // never leave a caller waiting
       if (!job) return;
       diffdope_ros::Refine::Response res;
@@ -72,6 +73,27 @@ void RefinerNodelet::workerLoop() {
       stats_.serving_since = ros::WallTime();
     }
   }
+}
+
+void RefinerNodelet::applyPendingSettings() {
+  std::optional<RuntimeSettings> settings;
+  {
+    std::lock_guard<std::mutex> lock(work_mutex_);
+    settings.swap(pending_settings_);
+  }
+  if (!settings) return;
+  try {
+    if (refiner_) refiner_->set_options(settings->refiner);  // the same renderer: meshes stay cached
+    for (auto& slot : slots_) slot->track.set_options(settings->track);
+  } catch (const std::invalid_argument& e) {  // (checked by the callback already: a bug guard)
+    errors_.error("reconfigure", std::string("reconfigured values not applied: ") + e.what());
+    if (refiner_) refiner_->set_options(refiner_options_);
+    for (auto& slot : slots_) slot->track.set_options(track_options_);
+    return;
+  }
+  refiner_options_ = settings->refiner;
+  track_options_ = settings->track;
+  publish_implausible_ = settings->publish_implausible;
 }
 
 void RefinerNodelet::convertFrame(Frame& frame) {
@@ -322,13 +344,15 @@ std::vector<diffdope_ros::RefinedPose> RefinerNodelet::refineAndPublish(
   if (targets.empty()) {
     return out;
   }
-  // Per-call overrides (service) get their own refiner; streaming reuses the node's.
-  std::unique_ptr<diffdope::Refiner> custom;
-  if (options.iterations != refiner_options_.iterations || options.batch_size != refiner_options_.batch_size)
-    custom = std::make_unique<diffdope::Refiner>(options);
-  diffdope::Refiner& refiner = custom ? *custom : *refiner_;
+  // Per-call overrides (service) run on the node's refiner too (its meshes stay cached), then it is set back.
+  struct CallOptions {
+    diffdope::Refiner& refiner;
+    const diffdope::RefinerOptions saved;
+    ~CallOptions() { refiner.set_options(saved); }  // (valid: they were in force)
+  } call{*refiner_, refiner_->options()};
+  refiner_->set_options(options);
   const ros::WallTime refine_start = ros::WallTime::now();
-  std::vector<diffdope::RefineResult> results = refiner.refine_all(frame.camera, frame.observation, targets);
+  std::vector<diffdope::RefineResult> results = refiner_->refine_all(frame.camera, frame.observation, targets);
   refine_time_.observe(double(diffdope::planned_evaluations(options)) * double(targets.size()),
                        (ros::WallTime::now() - refine_start).toSec());
 

@@ -68,6 +68,21 @@ TEST(ObjectTrack, DetectionAgeLimitBothWays) {
   expect_seed(t.seed_for(10.5), SeedSource::kDetector, 0.1, 10.0);
 }
 
+TEST(ObjectTrack, NewOptionsJudgeTheNextCall) {
+  ObjectTrack t(options());
+  t.add_detection(at(0.1), 10.0);
+  EXPECT_TRUE(t.has_fresh_detection(10.8));
+  TrackOptions strict = options();
+  strict.max_detection_age = 0.5;
+  t.set_options(strict);
+  EXPECT_FALSE(t.has_fresh_detection(10.8));  // the kept detection, judged by the new age
+  EXPECT_TRUE(t.has_fresh_detection(10.4));
+  strict.max_failures = 0;
+  EXPECT_THROW(t.set_options(strict), std::invalid_argument);
+  EXPECT_EQ(t.options().max_failures, 2);
+  EXPECT_DOUBLE_EQ(t.options().max_detection_age, 0.5);
+}
+
 TEST(ObjectTrack, PeekDoesNotConsume) {
   ObjectTrack t(options());
   t.add_detection(at(0.1), 10.0);

@@ -218,6 +218,41 @@ TEST(Refiner, SameSeedSameResultOtherSeedOtherRates) {
   }
 }
 
+TEST(Refiner, NewOptionsOnARunningRefinerActAsANewRefiner) {
+  const Scene s = make_scene(4);
+  std::mt19937_64 rng(4);
+  const Pose init = perturb_pose(s.truth, s.mesh.center(), 10 * M_PI / 180, 0.01, rng);
+  RefinerOptions o = test_options();
+  o.iterations = 20;
+  Refiner running(o);
+  running.refine(s.cam, s.obs, s.mesh, init);  // caches the mesh's levels of detail
+  RefinerOptions tuned = o;
+  tuned.iterations = 7;
+  tuned.batch_size = 5;
+  tuned.seed = 3;
+  tuned.loss.weight_rgb = 0.5;
+  running.set_options(tuned);
+  const RefineResult a = running.refine(s.cam, s.obs, s.mesh, init);
+  const RefineResult b = Refiner(tuned).refine(s.cam, s.obs, s.mesh, init);
+  EXPECT_EQ(a.iterations, 7);
+  EXPECT_EQ(a.run_losses.size(), 5u);
+  EXPECT_EQ(a.pose.matrix(), b.pose.matrix());
+  EXPECT_EQ(a.learning_rates, b.learning_rates);
+  // What builds the renderer cannot change, nor can an invalid value; the options stay as they were.
+  RefinerOptions other = tuned;
+  other.render.lod_pixel_error = 1.0;
+  EXPECT_THROW(running.set_options(other), std::invalid_argument);
+  other = tuned;
+  other.device = "cuda";
+  EXPECT_THROW(running.set_options(other), std::invalid_argument);
+  other = tuned;
+  other.lr_low = 2 * other.lr_high;
+  EXPECT_THROW(running.set_options(other), std::invalid_argument);
+  EXPECT_EQ(running.options().iterations, 7);
+  EXPECT_EQ(running.options().render, tuned.render);
+  EXPECT_EQ(running.options().lr_low, tuned.lr_low);
+}
+
 TEST(Refiner, WorksWithEachModalityMissing) {
   const Scene s = make_scene(5);
   std::mt19937_64 rng(5);

@@ -1,0 +1,158 @@
+// rostest (reconfigure.test): runtime tuning through dynamic_reconfigure while a bag plays. The values at start
+// are the node's own (the objects YAML, then ~parameters), a change reaches the next frames (iterations and
+// runs of every published result), mode on_request stops streaming and tracking resumes it, and a set of values
+// the options' checks refuse (lr_low > lr_high) is reverted as a whole while the node keeps refining.
+#include <dynamic_reconfigure/Reconfigure.h>
+#include <gtest/gtest.h>
+#include <ros/ros.h>
+
+#include <mutex>
+
+#include "diffdope_ros/RefinedPoseArray.h"
+
+namespace {
+
+const char* kService = "/diffdope_refiner/set_parameters";
+
+struct Received {
+  ros::WallTime at;
+  std::vector<int> iterations;  // of every result
+};
+
+struct World {
+  std::mutex mutex;
+  std::vector<Received> arrays;
+  void onRefined(const diffdope_ros::RefinedPoseArrayConstPtr& m) {
+    Received r{ros::WallTime::now(), {}};
+    for (const auto& p : m->poses) r.iterations.push_back(p.iterations);
+    std::lock_guard<std::mutex> l(mutex);
+    arrays.push_back(r);
+  }
+  std::vector<Received> since(ros::WallTime t) {
+    std::lock_guard<std::mutex> l(mutex);
+    std::vector<Received> out;
+    for (const auto& r : arrays)
+      if (r.at > t) out.push_back(r);
+    return out;
+  }
+};
+World* world = nullptr;
+
+dynamic_reconfigure::Config set(const dynamic_reconfigure::Config& change) {
+  dynamic_reconfigure::Reconfigure srv;
+  srv.request.config = change;
+  EXPECT_TRUE(ros::service::call(kService, srv)) << kService << " failed";
+  return srv.response.config;
+}
+template <typename T, typename V>
+void add(std::vector<T>& list, const std::string& name, V value) {
+  T p;
+  p.name = name;
+  p.value = value;
+  list.push_back(p);
+}
+int intValue(const dynamic_reconfigure::Config& c, const std::string& name) {
+  for (const auto& p : c.ints)
+    if (p.name == name) return p.value;
+  ADD_FAILURE() << "no int parameter " << name;
+  return -1;
+}
+double doubleValue(const dynamic_reconfigure::Config& c, const std::string& name) {
+  for (const auto& p : c.doubles)
+    if (p.name == name) return p.value;
+  ADD_FAILURE() << "no double parameter " << name;
+  return -1;
+}
+std::string strValue(const dynamic_reconfigure::Config& c, const std::string& name) {
+  for (const auto& p : c.strs)
+    if (p.name == name) return p.value;
+  ADD_FAILURE() << "no string parameter " << name;
+  return "";
+}
+
+/// Waits until `n` arrays arrived after `t` (false after `timeout` seconds).
+bool waitForArrays(ros::WallTime t, size_t n, double timeout) {
+  const ros::WallTime end = ros::WallTime::now() + ros::WallDuration(timeout);
+  while (ros::WallTime::now() < end) {
+    if (world->since(t).size() >= n) return true;
+    ros::WallDuration(0.05).sleep();
+  }
+  return false;
+}
+
+}  // namespace
+
+TEST(Reconfigure, ChangesTakeEffectAtTheNextFramesAndBadSetsAreReverted) {
+  ASSERT_TRUE(ros::service::waitForService(kService, ros::Duration(30))) << kService << " never appeared";
+  // An empty request returns the values in force: the YAML's runs and iterations, the launch file's image scale.
+  const dynamic_reconfigure::Config start = set(dynamic_reconfigure::Config());
+  EXPECT_EQ(intValue(start, "iterations"), 40);
+  EXPECT_EQ(intValue(start, "batch_size"), 16);
+  EXPECT_NEAR(doubleValue(start, "image_scale"), 0.45, 1e-9);
+  EXPECT_EQ(strValue(start, "mode"), "tracking");
+  ASSERT_TRUE(waitForArrays(ros::WallTime(), 3, 60)) << "the refiner never streamed";
+  for (const auto& r : world->since(ros::WallTime()))
+    for (int it : r.iterations) EXPECT_EQ(it, 40);
+
+  // Fewer, shorter runs: every result after the one in flight has 12 iterations.
+  dynamic_reconfigure::Config change;
+  add(change.ints, "iterations", 12);
+  add(change.ints, "batch_size", 6);
+  const dynamic_reconfigure::Config fast = set(change);
+  EXPECT_EQ(intValue(fast, "iterations"), 12);
+  EXPECT_EQ(intValue(fast, "batch_size"), 6);
+  const ros::WallTime changed = ros::WallTime::now();
+  ASSERT_TRUE(waitForArrays(changed, 4, 60)) << "no frames refined after the change";
+  const auto after = world->since(changed);
+  int with_results = 0;
+  for (size_t i = 1; i < after.size(); ++i) {  // (the first may have started before the change)
+    for (int it : after[i].iterations) EXPECT_EQ(it, 12);
+    with_results += !after[i].iterations.empty();
+  }
+  EXPECT_GT(with_results, 0) << "no results to check after the change";
+
+  // A set the options' checks refuse is reverted whole: the iterations in it do not apply either.
+  dynamic_reconfigure::Config bad;
+  add(bad.doubles, "lr_low", 0.5);
+  add(bad.doubles, "lr_high", 0.1);
+  add(bad.ints, "iterations", 25);
+  const dynamic_reconfigure::Config reverted = set(bad);
+  EXPECT_NEAR(doubleValue(reverted, "lr_low"), doubleValue(start, "lr_low"), 1e-12);
+  EXPECT_NEAR(doubleValue(reverted, "lr_high"), doubleValue(start, "lr_high"), 1e-12);
+  EXPECT_EQ(intValue(reverted, "iterations"), 12);
+  const ros::WallTime refused = ros::WallTime::now();
+  ASSERT_TRUE(waitForArrays(refused, 3, 60)) << "the node stopped refining after a refused set";
+  const auto still = world->since(refused);
+  for (size_t i = 1; i < still.size(); ++i)
+    for (int it : still[i].iterations) EXPECT_EQ(it, 12);
+
+  // on_request: streaming stops (one refinement may be in flight); tracking: it resumes.
+  dynamic_reconfigure::Config stop;
+  add(stop.strs, "mode", std::string("on_request"));
+  EXPECT_EQ(strValue(set(stop), "mode"), "on_request");
+  ros::WallDuration(1.5).sleep();
+  const ros::WallTime quiet = ros::WallTime::now();
+  ros::WallDuration(3.0).sleep();
+  EXPECT_EQ(world->since(quiet).size(), 0u) << "still streaming in on_request mode";
+  dynamic_reconfigure::Config resume;
+  add(resume.strs, "mode", std::string("tracking"));
+  set(resume);
+  EXPECT_TRUE(waitForArrays(ros::WallTime::now(), 2, 60)) << "streaming did not resume in tracking mode";
+
+  // A mode that does not exist is refused.
+  dynamic_reconfigure::Config unknown;
+  add(unknown.strs, "mode", std::string("sometimes"));
+  EXPECT_EQ(strValue(set(unknown), "mode"), "tracking");
+}
+
+int main(int argc, char** argv) {
+  testing::InitGoogleTest(&argc, argv);
+  ros::init(argc, argv, "test_reconfigure");
+  ros::NodeHandle nh;
+  World w;
+  world = &w;
+  ros::Subscriber sub = nh.subscribe("/diffdope_refiner/refined_poses", 50, &World::onRefined, &w);
+  ros::AsyncSpinner spinner(2);
+  spinner.start();
+  return RUN_ALL_TESTS();
+}

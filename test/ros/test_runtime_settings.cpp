@@ -1,0 +1,100 @@
+// Runtime settings <-> dynamic_reconfigure values (runtime_settings.hpp): a round trip keeps every value, the
+// library's own checks refuse what the YAML would refuse, and what the config does not hold stays as it was.
+#include <gtest/gtest.h>
+
+#include "diffdope_ros/runtime_settings.hpp"
+
+using diffdope_ros::RuntimeSettings;
+using diffdope_ros::StreamMode;
+
+namespace {
+
+RuntimeSettings someSettings() {
+  RuntimeSettings s;
+  s.mode = StreamMode::kContinuous;
+  s.refiner.iterations = 37;
+  s.refiner.batch_size = 9;
+  s.refiner.image_scale = 0.4;
+  s.refiner.coarse_fraction = 0.25;
+  s.refiner.lr_low = 0.002;
+  s.refiner.lr_high = 0.02;
+  s.refiner.early_stop_patience = 5;
+  s.refiner.explore_tolerance = 0.03;
+  s.refiner.loss.weight_rgb = 0.7;
+  s.refiner.loss.weight_depth = 2.0;
+  s.refiner.loss.weight_mask = 0.3;
+  s.refiner.loss.weight_edges = 0.1;
+  s.refiner.loss.weight_texture = 0.2;
+  s.refiner.min_mask_iou = 0.6;
+  s.refiner.min_depth_inliers = 0.7;
+  s.refiner.min_print_significance = 2.5;
+  s.refiner.render.lod_pixel_error = 0.5;  // not in the config: must survive
+  s.publish_implausible = true;
+  s.track.tracking = false;
+  s.track.max_detection_age = 0.4;
+  s.track.track_timeout = 2.0;
+  s.track.max_failures = 4;
+  s.track.predict = false;
+  return s;
+}
+
+}  // namespace
+
+TEST(RuntimeSettings, RoundTripKeepsEveryValue) {
+  const RuntimeSettings s = someSettings();
+  const RuntimeSettings back = diffdope_ros::from_config(diffdope_ros::to_config(s), RuntimeSettings());
+  EXPECT_EQ(back.mode, s.mode);
+  EXPECT_EQ(back.refiner.iterations, 37);
+  EXPECT_EQ(back.refiner.batch_size, 9);
+  EXPECT_DOUBLE_EQ(back.refiner.image_scale, 0.4);
+  EXPECT_DOUBLE_EQ(back.refiner.coarse_fraction, 0.25);
+  EXPECT_DOUBLE_EQ(back.refiner.lr_low, 0.002);
+  EXPECT_DOUBLE_EQ(back.refiner.lr_high, 0.02);
+  EXPECT_EQ(back.refiner.early_stop_patience, 5);
+  EXPECT_DOUBLE_EQ(back.refiner.explore_tolerance, 0.03);
+  EXPECT_DOUBLE_EQ(back.refiner.loss.weight_rgb, 0.7);
+  EXPECT_DOUBLE_EQ(back.refiner.loss.weight_depth, 2.0);
+  EXPECT_DOUBLE_EQ(back.refiner.loss.weight_mask, 0.3);
+  EXPECT_DOUBLE_EQ(back.refiner.loss.weight_edges, 0.1);
+  EXPECT_DOUBLE_EQ(back.refiner.loss.weight_texture, 0.2);
+  EXPECT_DOUBLE_EQ(back.refiner.min_mask_iou, 0.6);
+  EXPECT_DOUBLE_EQ(back.refiner.min_depth_inliers, 0.7);
+  EXPECT_DOUBLE_EQ(back.refiner.min_print_significance, 2.5);
+  EXPECT_TRUE(back.publish_implausible);
+  EXPECT_FALSE(back.track.tracking);  // continuous
+  EXPECT_DOUBLE_EQ(back.track.max_detection_age, 0.4);
+  EXPECT_DOUBLE_EQ(back.track.track_timeout, 2.0);
+  EXPECT_EQ(back.track.max_failures, 4);
+  EXPECT_FALSE(back.track.predict);
+  // What the config does not hold comes from the base.
+  EXPECT_DOUBLE_EQ(diffdope_ros::from_config(diffdope_ros::to_config(s), s).refiner.render.lod_pixel_error, 0.5);
+  EXPECT_DOUBLE_EQ(back.refiner.render.lod_pixel_error, RuntimeSettings().refiner.render.lod_pixel_error);
+}
+
+TEST(RuntimeSettings, ModesAndTracking) {
+  for (StreamMode m : {StreamMode::kContinuous, StreamMode::kTracking, StreamMode::kOnRequest})
+    EXPECT_EQ(diffdope_ros::parse_stream_mode(diffdope_ros::to_string(m)), m);
+  EXPECT_THROW(diffdope_ros::parse_stream_mode("sometimes"), std::invalid_argument);
+  diffdope_ros::RefinerConfig c = diffdope_ros::to_config(RuntimeSettings());
+  c.mode = "on_request";
+  EXPECT_TRUE(diffdope_ros::from_config(c, RuntimeSettings()).track.tracking);  // seeds from its own results
+  c.mode = "continuous";
+  EXPECT_FALSE(diffdope_ros::from_config(c, RuntimeSettings()).track.tracking);
+}
+
+TEST(RuntimeSettings, RefusesWhatTheYamlRefuses) {
+  const RuntimeSettings base;
+  auto refused = [&](auto change) {
+    diffdope_ros::RefinerConfig c = diffdope_ros::to_config(base);
+    change(c);
+    EXPECT_THROW(diffdope_ros::from_config(c, base), std::invalid_argument);
+  };
+  refused([](diffdope_ros::RefinerConfig& c) { c.lr_low = 0.5, c.lr_high = 0.1; });
+  refused([](diffdope_ros::RefinerConfig& c) {
+    c.weight_rgb = c.weight_depth = c.weight_mask = c.weight_edges = c.weight_texture = 0;
+  });
+  refused([](diffdope_ros::RefinerConfig& c) { c.mode = "sometimes"; });
+  refused([](diffdope_ros::RefinerConfig& c) { c.batch_size = 0; });
+  refused([](diffdope_ros::RefinerConfig& c) { c.max_track_failures = 0; });
+  refused([](diffdope_ros::RefinerConfig& c) { c.image_scale = std::nan(""); });
+}
