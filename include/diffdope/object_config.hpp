@@ -34,6 +34,9 @@ struct ObjectConfig {
   ObjectSymmetry symmetries;  // mesh frame, metres; load_object_mesh() gives them to the mesh
   int mask_label = -1;     // -1: any nonzero mask pixel belongs to the object
   std::string pose_topic;  // empty: the node's default (/dope/pose_<name>)
+  /// Instances of this object tracked at once ([1, kMaxInstances]); more than one names them <name>_<k>.
+  int max_instances = 1;
+  static constexpr int kMaxInstances = 32;  // (InstanceTracks::kMaxInstances)
   Pose model_transform;    // mesh frame -> object (detector) frame; identity by default
 };
 
@@ -41,6 +44,10 @@ struct ObjectsConfig {
   std::vector<ObjectConfig> objects;
   RefinerOptions refiner;
 };
+
+/// The name of instance `instance` on TF and topics: the object's name when it has one instance, else
+/// <name>_<instance>.
+std::string instance_name(const ObjectConfig& object, int instance);
 
 /// Turns a package:// URL into a file path (the ROS layer passes ros::package::getPath); throws when unknown.
 using PackageResolver = std::function<std::string(const std::string& package)>;

@@ -11,13 +11,12 @@
 namespace diffdope_ros {
 
 /// What a decoded array gives each object: every detection's best-scoring hypothesis, named through `class_ids`
-/// (object name -> DOPE class id, DOPE's own `class_ids` parameter); of several detections of one object, the
-/// highest score (instances of one object are not tracked yet); stamped and framed by the detection's header
-/// (the array's when the detection's frame is empty).
+/// (object name -> DOPE class id, DOPE's own `class_ids` parameter); an object's detections (one per instance
+/// seen) highest score first; stamped and framed by the detection's header (the array's when the detection's
+/// frame is empty). Which instance each one is, the node's InstanceTracks decide.
 struct DetectionSelection {
-  std::map<std::string, geometry_msgs::PoseStamped> by_object;
+  std::map<std::string, std::vector<geometry_msgs::PoseStamped>> by_object;
   std::vector<int64_t> unknown_class_ids;  // detections whose class id no object has
-  int extra_instances = 0;                 // detections of an object that already had a better one
 };
 DetectionSelection select_detections(const DecodedDetectionArray& array, const std::map<std::string, int64_t>& class_ids);
 

@@ -38,6 +38,7 @@
 
 #include "diffdope/mesh.hpp"
 #include "diffdope/object_config.hpp"
+#include "diffdope/instance_tracks.hpp"
 #include "diffdope/object_track.hpp"
 #include "diffdope/refine_time.hpp"
 #include "diffdope/refiner.hpp"
@@ -71,18 +72,27 @@ class RefinerNodelet : public nodelet::Nodelet {
     cv::Mat labels;                     // mask / label image, empty without a mask
   };
 
-  /// A configured object: its mesh (null when it failed to load: the object is disabled), its track and topics.
+  /// One instance of a configured object: its name on TF and topics (the object's name, or <name>_<k> when the
+  /// object may have several instances) and its outputs.
+  struct Instance {
+    std::string name;
+    ros::Publisher pose_pub;
+    ros::Publisher cov_pub;   // ~refined_cov/<name>: the same pose with its covariance
+    ros::Time last_tf_stamp;  // tf2 rejects a second transform at the same stamp (service on the same frame)
+  };
+
+  /// A configured object: its mesh (null when it failed to load: the object is disabled), its instances' tracks
+  /// and outputs.
   struct Slot {
     diffdope::ObjectConfig config;
     std::unique_ptr<diffdope::Mesh> mesh;
     std::string disabled_reason;
-    diffdope::ObjectTrack track;
-    std::optional<geometry_msgs::PoseStamped> pending_detection;  // raw detector message, any frame
+    std::unique_ptr<diffdope::InstanceTracks> tracks;  // the worker's; null when disabled
+    std::vector<Instance> instances;                   // config.max_instances of them
+    /// The poses of the latest detector message for this object (raw, any frame; several = several instances).
+    std::optional<std::vector<geometry_msgs::PoseStamped>> pending_detections;
     ros::Subscriber detection_sub;
-    ros::Publisher pose_pub;
-    ros::Publisher cov_pub;  // ~refined_cov/<name>: the same pose with its covariance
-    std::atomic<bool> tracking{false};  // track.tracking() for diagnostics (the track itself is the worker's)
-    ros::Time last_tf_stamp;  // tf2 rejects a second transform at the same stamp (service on the same frame)
+    std::atomic<int> tracking{0};  // instances whose track is alive (diagnostics; the tracks are the worker's)
   };
 
   /// A unit of worker work: the next streaming frame, or a service request waiting for its response.
@@ -110,7 +120,8 @@ class RefinerNodelet : public nodelet::Nodelet {
   void onDetectionArray(const topic_tools::ShapeShifter::ConstPtr& msg);
   void subscribeDetectionArray();
   std::atomic<bool> resubscribe_detections_{false};  // a publisher of another type was seen
-  void storeDetection(const geometry_msgs::PoseStamped& pose, size_t slot, const std::string& origin);
+  /// Checks and keeps one detector message's poses of an object (one per instance it saw).
+  void storeDetections(const std::vector<geometry_msgs::PoseStamped>& poses, size_t slot, const std::string& origin);
   bool onRefineService(diffdope_ros::Refine::Request& req, diffdope_ros::Refine::Response& res);
   /// dynamic_reconfigure: validates the new values (a refused set reverts `config`) and hands them to the worker.
   void onReconfigure(RefinerConfig& config, uint32_t level);
@@ -136,18 +147,23 @@ class RefinerNodelet : public nodelet::Nodelet {
   /// detections belong to the other timeline and are dropped, with one warning. Worker thread only.
   void resetOnTimeJump(const Frame& frame);
   double last_frame_stamp_ = 0.0;  // worker thread only
-  /// Per object (slot index), its initial poses; the refiner shares the runs among them and the loss decides.
-  using SeedList = std::vector<std::pair<size_t, std::vector<diffdope::Seed>>>;
+  /// What a frame refines: object (slot index) and instance, with its initial poses (the refiner shares the
+  /// runs among them and the loss decides).
+  struct TargetSeeds {
+    size_t slot;
+    int instance;
+    std::vector<diffdope::Seed> starts;
+  };
+  using SeedList = std::vector<TargetSeeds>;
+  using TargetList = std::vector<std::pair<size_t, int>>;  // (slot, instance) per result
   /// Refines and publishes; objects that could not be refined are named (with the reason) in `skipped`.
   std::vector<diffdope_ros::RefinedPose> refineAndPublish(const Frame& frame, const SeedList& seeds,
                                                           const diffdope::RefinerOptions& options,
                                                           std::vector<std::string>* skipped);
   void updateTrackingFlags(double stamp);  // Slot::tracking for diagnostics
-  void reportLostTrack(const Slot& slot);
-  void publishOverlay(const Frame& frame, const std::vector<size_t>& slots,
-                      const std::vector<diffdope::RefineResult>& results);
-  void publishMarkers(const Frame& frame, const std::vector<size_t>& slots,
-                      const std::vector<diffdope::RefineResult>& results);
+  void reportLostTrack(const Slot& slot, int instance);
+  void publishOverlay(const Frame& frame, const TargetList& targets, const std::vector<diffdope::RefineResult>& results);
+  void publishMarkers(const Frame& frame, const TargetList& targets, const std::vector<diffdope::RefineResult>& results);
 
   // Parameters. The worker's copies (refiner_options_, track_options_, publish_implausible_) change only in
   // applyPendingSettings(); mode_ is read by the input callbacks too.
@@ -177,7 +193,7 @@ class RefinerNodelet : public nodelet::Nodelet {
 
   ErrorReporter errors_;
   std::vector<std::unique_ptr<Slot>> slots_;
-  std::mutex detections_mutex_;  // Slot::pending_detection
+  std::mutex detections_mutex_;  // Slot::pending_detections
 
   // Inputs.
   std::unique_ptr<image_transport::ImageTransport> it_;
@@ -197,7 +213,7 @@ class RefinerNodelet : public nodelet::Nodelet {
   std::unique_ptr<message_filters::Synchronizer<Policy4>> sync4_;
   ros::Subscriber initial_poses_sub_, detection_array_sub_;
   struct DetectionArrayCounts {
-    long received = 0, used = 0, malformed = 0, unknown_class = 0, extra_instances = 0;
+    long received = 0, used = 0, malformed = 0, unknown_class = 0;
   } detection_array_counts_;  // under arrival_mutex_
   ros::ServiceServer refine_srv_;
   // The service has its own queue and thread: a call waiting for the worker holds none of the manager's
@@ -227,6 +243,7 @@ class RefinerNodelet : public nodelet::Nodelet {
   // Statistics (work_mutex_).
   struct Stats {
     long frames_synced = 0, frames_skipped = 0, frames_refined = 0, objects_refined = 0, implausible = 0;
+    long extra_detections = 0;  // detections of an object beyond its max_instances
     long requests_succeeded = 0, requests_failed = 0;  // ~refine calls answered (Refine::Response::success)
     double last_latency = -1, latency_sum = 0, last_refine_ms = 0;
     double ms_per_evaluation = 0;       // refine_time_'s current cost (copied for diagnostics)

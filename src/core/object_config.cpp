@@ -149,12 +149,13 @@ ObjectsConfig parse_objects_config(const std::string& yaml, const std::string& o
         else if (key == "symmetric") o.symmetric = kv.second.as<bool>();
         else if (key == "mask_label") o.mask_label = kv.second.as<int>();
         else if (key == "pose_topic") o.pose_topic = kv.second.as<std::string>();
+        else if (key == "max_instances") o.max_instances = kv.second.as<int>();
         else if (key == "model_transform") o.model_transform = read_transform(kv.second, where + ".model_transform");
         else if (key == "symmetries") o.symmetries = read_symmetries(kv.second, where + ".symmetries");
         else
           throw std::runtime_error(where + ": unknown key '" + key +
                                    "' (name, mesh, mesh_scale, symmetric, symmetries, mask_label, pose_topic, "
-                                   "model_transform)");
+                                   "max_instances, model_transform)");
       }
     } catch (const YAML::Exception& e) {
       throw std::runtime_error(where + ": " + e.what());
@@ -168,6 +169,9 @@ ObjectsConfig parse_objects_config(const std::string& yaml, const std::string& o
     if (!(o.mesh_scale > 0) || !std::isfinite(o.mesh_scale))
       throw std::runtime_error(where + ": 'mesh_scale' must be positive");
     if (o.mask_label < -1) throw std::runtime_error(where + ": 'mask_label' must be -1 or a label value >= 0");
+    if (o.max_instances < 1 || o.max_instances > ObjectConfig::kMaxInstances)
+      throw std::runtime_error(where + ": 'max_instances' must be in [1, " +
+                               std::to_string(ObjectConfig::kMaxInstances) + "]");
     try {
       o.mesh_path = resolve_mesh_path(o.mesh, base_dir, resolve_package);
     } catch (const std::exception& e) {  // name the file and the object, not only the URL
@@ -176,7 +180,18 @@ ObjectsConfig parse_objects_config(const std::string& yaml, const std::string& o
     if (!o.symmetries.empty()) o.symmetric = true;  // declared symmetries are scored with ADD-S too
     cfg.objects.push_back(o);
   }
+  // Instances are named <name>_<k> on TF and topics: no other object may carry one of those names.
+  for (const ObjectConfig& o : cfg.objects)
+    for (int k = 0; o.max_instances > 1 && k < o.max_instances; ++k)
+      if (names.count(instance_name(o, k)))
+        throw std::runtime_error(origin + ": object '" + instance_name(o, k) + "' has the name of instance " +
+                                 std::to_string(k) + " of '" + o.name + "' (max_instances " +
+                                 std::to_string(o.max_instances) + "): rename one");
   return cfg;
+}
+
+std::string instance_name(const ObjectConfig& object, int instance) {
+  return object.max_instances > 1 ? object.name + "_" + std::to_string(instance) : object.name;
 }
 
 ObjectsConfig load_objects_config(const std::string& path, const PackageResolver& resolve_package,

@@ -3,12 +3,14 @@
 
 #include "diffdope_ros/conversions.hpp"
 
+#include <algorithm>
+
 namespace diffdope_ros {
 
 DetectionSelection select_detections(const DecodedDetectionArray& array,
                                      const std::map<std::string, int64_t>& class_ids) {
   DetectionSelection out;
-  std::map<std::string, double> best_score;
+  std::map<std::string, std::vector<std::pair<double, geometry_msgs::PoseStamped>>> scored;
   for (const DecodedDetection& d : array.detections) {
     if (d.results.empty()) continue;
     const DecodedHypothesis* h = &d.results.front();
@@ -21,18 +23,16 @@ DetectionSelection select_detections(const DecodedDetectionArray& array,
       out.unknown_class_ids.push_back(h->class_id);
       continue;
     }
-    auto seen = best_score.find(name);
-    if (seen != best_score.end()) {
-      ++out.extra_instances;
-      if (h->score <= seen->second) continue;
-    }
-    best_score[name] = h->score;
     geometry_msgs::PoseStamped p;
     const bool own = !d.frame_id.empty();
     p.header.frame_id = own ? d.frame_id : array.frame_id;
     p.header.stamp = own ? ros::Time(d.stamp_sec, d.stamp_nsec) : ros::Time(array.stamp_sec, array.stamp_nsec);
     p.pose = pose_to_msg(h->pose);
-    out.by_object[name] = p;
+    scored[name].emplace_back(h->score, p);
+  }
+  for (auto& [name, list] : scored) {
+    std::stable_sort(list.begin(), list.end(), [](const auto& a, const auto& b) { return a.first > b.first; });
+    for (auto& entry : list) out.by_object[name].push_back(entry.second);
   }
   return out;
 }

@@ -2,13 +2,15 @@
 // DOPE-like detections, the objects' meshes and the objects YAML the refiner nodelet reads.
 //
 //   diffdope_make_bag --out DIR [--frames N] [--rate HZ] [--detector-every K] [--detector-latency S]
-//                     [--objects 1|2|3|can] [--seed S] [--width W] [--height H] [--depth-encoding 16UC1|32FC1]
+//                     [--objects 1|2|3|can|twins] [--seed S] [--width W] [--height H] [--depth-encoding 16UC1|32FC1]
 //                     [--rot-noise-deg D] [--trans-noise-m M] [--compression none|lz4|bz2]
 //
 // DIR/demo.bag, DIR/meshes/<name>.ply (+ <name>.png texture; metres), DIR/objects.yaml (object_config.hpp).
 // Objects: a scan-like bottle alone (--objects 1), or a low-poly printed box, the bottle and a scan-like mug (labels
 // 1, 2, 3 in the mask; scan-like: 15k triangles, UV atlas, 2048^2 print), or a striped can alone (--objects can:
-// symmetric about its axis, declared so in objects.yaml, its detections turned at random about it), side by side about 0.6 m in
+// symmetric about its axis, declared so in objects.yaml, its detections turned at random about it), or two
+// instances of the printed box (--objects twins: one label, max_instances 2 in objects.yaml, detected together in
+// one InitialPoseArray on /diffdope_refiner/initial_poses), side by side about 0.6 m in
 // front of the camera, each turning slowly (~15 deg/s) about its own axis through its centre and drifting (~2 cm/s,
 // a smooth back-and-forth of 3 cm amplitude so long bags stay in view). Frames are composed with
 // synthesize_scene; the background (and the sensor noise pattern) is the same in every frame, as for a static
@@ -20,6 +22,7 @@
 //   /ground_truth                  diffdope_ros/InitialPoseArray: true mesh poses in camera_color_optical_frame
 //   /dope/pose_<name>              geometry_msgs/PoseStamped in camera_link, every K-th frame, stamped t_k and
 //                                  written at t_k + detector latency (perturbed by the paper's rule)
+//   /diffdope_refiner/initial_poses  (twins) diffdope_ros/InitialPoseArray: both boxes' detections, as above
 //   /tf_static                     tf2_msgs/TFMessage camera_link -> camera_color_optical_frame (latched)
 #include <cv_bridge/cv_bridge.h>
 #include <diffdope_ros/InitialPoseArray.h>
@@ -70,6 +73,7 @@ struct Args {
   int detector_frames = -1;  // detections only on frames k < detector_frames (-1: all): then the detector is silent
   int objects = 3;
   bool can = false;  // --objects can: one striped can, declared symmetric about its axis
+  bool twins = false;  // --objects twins: two instances of the box
   uint64_t seed = 1;
   int width = 640, height = 480;
   std::string depth_encoding = "16UC1";
@@ -80,7 +84,7 @@ struct Args {
 
 void usage(std::ostream& os) {
   os << "usage: diffdope_make_bag --out DIR [--frames N (40)] [--rate HZ (10)] [--detector-every K (3)]\n"
-        "         [--detector-latency S (0.15)] [--objects 1|2|3|can (3)] [--seed S (1)] [--width W (640)]\n"
+        "         [--detector-latency S (0.15)] [--objects 1|2|3|can|twins (3)] [--seed S (1)] [--width W (640)]\n"
         "         [--height H (480)] [--depth-encoding 16UC1|32FC1 (16UC1)] [--rot-noise-deg D (5)]\n"
         "         [--trans-noise-m M (0.01)] [--compression none|lz4|bz2 (lz4)]\n"
         "         [--detector-frames N (all): the detector goes silent from frame N on (tracking)]\n"
@@ -134,6 +138,7 @@ Args parse_args(int argc, char** argv) {
     else if (opt == "--detector-frames") a.detector_frames = int(parse_int(opt, v, 0, 100000));
     else if (opt == "--detector-latency") a.detector_latency = parse_double(opt, v, 0.0, 60.0, true);
     else if (opt == "--objects" && v == "can") a.objects = 1, a.can = true;
+    else if (opt == "--objects" && v == "twins") a.objects = 2, a.twins = true;
     else if (opt == "--objects") a.objects = int(parse_int(opt, v, 1, 3));
     else if (opt == "--seed") a.seed = uint64_t(parse_int(opt, v, 0, std::numeric_limits<long long>::max()));
     else if (opt == "--width") a.width = int(parse_int(opt, v, 32, 8192));
@@ -330,6 +335,10 @@ int main(int argc, char** argv) {
       ObjectSymmetry about_axis;
       about_axis.continuous.push_back({Eigen::Vector3d::UnitZ(), Eigen::Vector3d::Zero()});
       objects.push_back({"can", make_striped_can(), true, 1, about_axis});
+    } else if (args.twins) {  // one mesh, two instances, one label
+      const Mesh box = make_box(Eigen::Vector3d(0.10, 0.05, 0.14), make_label_texture(512, 11));
+      objects.push_back({"box", box, false, 1});
+      objects.push_back({"box", box, false, 1});
     } else if (args.objects == 1) {
       objects.push_back({"bottle", bottle(), false, 1});
     } else {
@@ -344,11 +353,19 @@ int main(int argc, char** argv) {
     std::ostringstream yaml;
     yaml << "# Written by diffdope_make_bag: the objects of demo.bag (meshes in metres, next to this file).\n"
          << "refiner:\n  iterations: 40\n  batch_size: 16\nobjects:\n";
-    for (const DemoObject& o : objects) {
+    std::vector<size_t> config_index;  // per scene object, its entry in objects.yaml (twins share one)
+    for (size_t i = 0; i < objects.size(); ++i) {
+      const DemoObject& o = objects[i];
+      if (i > 0 && o.name == objects[i - 1].name) {
+        config_index.push_back(config_index.back());
+        continue;
+      }
+      config_index.push_back(i == 0 ? 0 : config_index.back() + 1);
       save_ply(o.mesh, (out_dir / "meshes" / (o.name + ".ply")).string(), 1.0);
       yaml << "  - name: " << o.name << "\n    mesh: " << yaml_quote("meshes/" + o.name + ".ply")
            << "\n    mesh_scale: 1\n    symmetric: " << (o.symmetric ? "true" : "false")
            << "\n    mask_label: " << o.label << "\n";
+      if (args.twins) yaml << "    max_instances: 2\n";
       if (!o.declared.continuous.empty()) {
         yaml << "    symmetries: {continuous: [";
         for (size_t k = 0; k < o.declared.continuous.size(); ++k) {
@@ -369,9 +386,9 @@ int main(int argc, char** argv) {
     // Read back what the nodelet will read: the config and the meshes, at the same size.
     const ObjectsConfig cfg = load_objects_config(yaml_path);
     for (size_t i = 0; i < n; ++i) {
-      const Mesh back = load_object_mesh(cfg.objects[i]);
+      const Mesh back = load_object_mesh(cfg.objects.at(config_index[i]));
       if (std::abs(back.diameter() - objects[i].mesh.diameter()) > 1e-4)
-        throw std::runtime_error(cfg.objects[i].mesh_path + ": mesh reads back at a different size");
+        throw std::runtime_error(cfg.objects.at(config_index[i]).mesh_path + ": mesh reads back at a different size");
     }
 
     // Camera and scene layout.
@@ -382,7 +399,7 @@ int main(int argc, char** argv) {
     auto renderer = make_cpu_renderer();
     std::mt19937_64 layout_rng(args.seed * 0x9E3779B97F4A7C15ull + 1);
     std::uniform_real_distribution<double> U(-1.0, 1.0);
-    const double spacing = n == 3 ? 0.12 : 0.14;
+    const double spacing = args.twins ? 0.2 : n == 3 ? 0.12 : 0.14;
     const int check_frames = std::min(args.frames, 200);
     std::vector<Motion> motions, best_motions;
     double best_score = -1;
@@ -448,10 +465,15 @@ int main(int argc, char** argv) {
       geometry_msgs::PoseStamped msg;
     };
     std::deque<Pending> pending;  // detections waiting for their arrival time (constant latency: FIFO)
+    std::deque<std::pair<ros::Time, diffdope_ros::InitialPoseArray>> pending_arrays;  // (twins)
     auto flush = [&](const ros::Time* until) {
       while (!pending.empty() && (!until || pending.front().write_time <= *until)) {
         bag.write(pending.front().topic, pending.front().write_time, pending.front().msg);
         pending.pop_front();
+      }
+      while (!pending_arrays.empty() && (!until || pending_arrays.front().first <= *until)) {
+        bag.write("/diffdope_refiner/initial_poses", pending_arrays.front().first, pending_arrays.front().second);
+        pending_arrays.pop_front();
       }
     };
 
@@ -518,8 +540,22 @@ int main(int argc, char** argv) {
           d.topic = "/dope/pose_" + objects[i].name;
           d.msg.header = header(t, kLinkFrame, uint32_t(k / args.detector_every));
           d.msg.pose = diffdope_ros::pose_to_msg(T_link_optical * noisy);
-          pending.push_back(d);
           ++detections;
+          if (!args.twins) {
+            pending.push_back(d);
+            continue;
+          }
+          // Both instances in one message, in a random order (the node must not rely on it).
+          if (pending_arrays.empty() || pending_arrays.back().first != d.write_time) {
+            diffdope_ros::InitialPoseArray a;
+            a.header = d.msg.header;
+            pending_arrays.emplace_back(d.write_time, a);
+          }
+          diffdope_ros::InitialPose p;
+          p.name = objects[i].name;
+          p.pose = d.msg;
+          auto& list = pending_arrays.back().second.poses;
+          list.insert(std::uniform_int_distribution<int>(0, 1)(detector_rng) ? list.end() : list.begin(), p);
         }
       }
     }

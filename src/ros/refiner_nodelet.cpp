@@ -163,16 +163,27 @@ void RefinerNodelet::loadObjects() {
     slot->config = cfg.objects[i];
     try {
       slot->mesh = std::make_unique<diffdope::Mesh>(diffdope::load_object_mesh(slot->config));
-      slot->track = diffdope::ObjectTrack(track_options_, slot->mesh->center().cast<double>());
+      // Detections within one diameter of an instance's last known centre are that instance's.
+      slot->tracks = std::make_unique<diffdope::InstanceTracks>(
+          slot->config.max_instances, track_options_, slot->mesh->center().cast<double>(), slot->mesh->diameter());
       NODELET_INFO_STREAM("object '" << slot->config.name << "': " << slot->mesh->num_triangles() << " triangles, "
-                                     << "diameter " << format_fixed(slot->mesh->diameter()) << " m");
+                                     << "diameter " << format_fixed(slot->mesh->diameter()) << " m"
+                                     << (slot->config.max_instances > 1
+                                             ? ", up to " + std::to_string(slot->config.max_instances) + " instances"
+                                             : std::string()));
     } catch (const std::exception& e) {
+      slot->mesh.reset();
       slot->disabled_reason = e.what();
       errors_.error("mesh_" + slot->config.name,
                     "object '" + slot->config.name + "' disabled: cannot load its mesh: " + e.what());
     }
-    slot->pose_pub = pnh.advertise<geometry_msgs::PoseStamped>("refined/" + slot->config.name, 10);
-    slot->cov_pub = pnh.advertise<geometry_msgs::PoseWithCovarianceStamped>("refined_cov/" + slot->config.name, 10);
+    for (int k = 0; k < slot->config.max_instances; ++k) {
+      Instance in;
+      in.name = diffdope::instance_name(slot->config, k);
+      in.pose_pub = pnh.advertise<geometry_msgs::PoseStamped>("refined/" + in.name, 10);
+      in.cov_pub = pnh.advertise<geometry_msgs::PoseWithCovarianceStamped>("refined_cov/" + in.name, 10);
+      slot->instances.push_back(in);
+    }
     slots_.push_back(std::move(slot));
   }
 }
@@ -407,10 +418,11 @@ void RefinerNodelet::reportInputError(const std::exception& e) {
 }
 
 void RefinerNodelet::onDetection(const geometry_msgs::PoseStampedConstPtr& msg, size_t slot) {
-  storeDetection(*msg, slot, "detection for '" + slots_[slot]->config.name + "'");
+  storeDetections({*msg}, slot, "detection for '" + slots_[slot]->config.name + "'");
 }
 
 void RefinerNodelet::onInitialPoses(const diffdope_ros::InitialPoseArrayConstPtr& msg) {
+  std::map<size_t, std::vector<geometry_msgs::PoseStamped>> by_slot;  // entries of one name: its instances
   for (const auto& p : msg->poses) {
     size_t i = 0;
     while (i < slots_.size() && slots_[i]->config.name != p.name) ++i;
@@ -418,20 +430,27 @@ void RefinerNodelet::onInitialPoses(const diffdope_ros::InitialPoseArrayConstPtr
       errors_.error("unknown_object", "~initial_poses: unknown object name '" + p.name + "' (not in the objects config)");
       continue;
     }
-    storeDetection(p.pose, i, "~initial_poses entry for '" + p.name + "'");
+    by_slot[i].push_back(p.pose);
   }
+  for (const auto& [i, poses] : by_slot)
+    storeDetections(poses, i, "~initial_poses entry for '" + slots_[i]->config.name + "'");
 }
 
-void RefinerNodelet::storeDetection(const geometry_msgs::PoseStamped& pose, size_t slot, const std::string& origin) {
-  try {
-    pose_from_msg(pose.pose, origin);  // reject NaN / zero quaternions at once
-    if (pose.header.frame_id.empty()) throw std::invalid_argument(origin + ": empty header.frame_id");
-  } catch (const std::exception& e) {
-    errors_.error("pose/" + slots_[slot]->config.name, std::string("initial pose ignored: ") + e.what());
-    return;
+void RefinerNodelet::storeDetections(const std::vector<geometry_msgs::PoseStamped>& poses, size_t slot,
+                                     const std::string& origin) {
+  std::vector<geometry_msgs::PoseStamped> usable;
+  for (const auto& pose : poses) {
+    try {
+      pose_from_msg(pose.pose, origin);  // reject NaN / zero quaternions at once
+      if (pose.header.frame_id.empty()) throw std::invalid_argument(origin + ": empty header.frame_id");
+      usable.push_back(pose);
+    } catch (const std::exception& e) {
+      errors_.error("pose/" + slots_[slot]->config.name, std::string("initial pose ignored: ") + e.what());
+    }
   }
+  if (usable.empty()) return;
   std::lock_guard<std::mutex> lock(detections_mutex_);
-  slots_[slot]->pending_detection = pose;
+  slots_[slot]->pending_detections = std::move(usable);  // the newest message wins, as for one object
 }
 
 void RefinerNodelet::subscribeDetectionArray() {
@@ -470,16 +489,15 @@ void RefinerNodelet::onDetectionArray(const topic_tools::ShapeShifter::ConstPtr&
   }
   const DetectionSelection chosen = select_detections(decoded, class_ids_);
   count(&DetectionArrayCounts::unknown_class, long(chosen.unknown_class_ids.size()));
-  count(&DetectionArrayCounts::extra_instances, chosen.extra_instances);
   if (!chosen.unknown_class_ids.empty())
     errors_.warn("class_ids", where + std::to_string(chosen.unknown_class_ids.size()) +
                                   " detection(s) with a class id no object has in ~class_ids (first: " +
                                   std::to_string(chosen.unknown_class_ids.front()) + ")");
-  for (const auto& [name, pose] : chosen.by_object) {
+  for (const auto& [name, poses] : chosen.by_object) {
     for (size_t i = 0; i < slots_.size(); ++i) {
       if (slots_[i]->config.name != name) continue;
-      count(&DetectionArrayCounts::used, 1);
-      storeDetection(pose, i, where + "class id " + std::to_string(class_ids_.at(name)) + " ('" + name + "')");
+      count(&DetectionArrayCounts::used, long(poses.size()));
+      storeDetections(poses, i, where + "class id " + std::to_string(class_ids_.at(name)) + " ('" + name + "')");
     }
   }
 }
@@ -559,9 +577,13 @@ void RefinerNodelet::onDiagnostics(diagnostic_updater::DiagnosticStatusWrapper& 
   stat.add("inputs", input_error_.empty() ? "subscribed" : "none: " + input_error_);
   stat.add("objects enabled", std::to_string(enabled) + " of " + std::to_string(slots_.size()));
   stat.add("backend", refiner_ ? refiner_->backend() : std::string("none (configuration error)"));
-  for (const auto& slot : slots_)
-    stat.add("object " + slot->config.name,
-             slot->mesh ? (slot->tracking ? "tracking" : "waiting for a pose") : "disabled: " + slot->disabled_reason);
+  for (const auto& slot : slots_) {
+    const int tracked = slot->tracking, n = slot->config.max_instances;
+    std::string state = "disabled: " + slot->disabled_reason;
+    if (slot->mesh && n == 1) state = tracked ? "tracking" : "waiting for a pose";
+    else if (slot->mesh) state = "tracking " + std::to_string(tracked) + " of up to " + std::to_string(n) + " instances";
+    stat.add("object " + slot->config.name, state);
+  }
   {
     // Every message of every input: synchronized, malformed (dropped with its reason before the synchronizer), or
     // never matched by the other inputs (stamps too far apart, a silent topic; up to ~queue_size still waiting).
@@ -581,15 +603,14 @@ void RefinerNodelet::onDiagnostics(diagnostic_updater::DiagnosticStatusWrapper& 
     const DetectionArrayCounts& c = detection_array_counts_;
     stat.add("input detections (Detection3DArray)",
              "received " + std::to_string(c.received) + ", used " + std::to_string(c.used) + ", malformed " +
-                 std::to_string(c.malformed) + ", unknown class ids " + std::to_string(c.unknown_class) +
-                 ", extra instances " + std::to_string(c.extra_instances) +
-                 " (instances of one object are not tracked yet: the highest score is used)");
+                 std::to_string(c.malformed) + ", unknown class ids " + std::to_string(c.unknown_class));
   }
   stat.add("frames synchronized", s.frames_synced);
   stat.add("frames refined", s.frames_refined);
   stat.add("frames skipped (worker busy)", s.frames_skipped);
   stat.add("objects refined", s.objects_refined);
   stat.add("implausible results", s.implausible);
+  stat.add("detections beyond max_instances (ignored)", s.extra_detections);
   stat.add("refine rate (frames/s)", format_fixed(rate, 2));
   stat.add("last latency (s)", format_fixed(s.last_latency));
   stat.add("mean latency (s)", format_fixed(s.frames_refined ? s.latency_sum / s.frames_refined : -1.0));

@@ -9,7 +9,7 @@
 
 namespace diffdope_ros {
 
-void RefinerNodelet::publishOverlay(const Frame& frame, const std::vector<size_t>& slots,
+void RefinerNodelet::publishOverlay(const Frame& frame, const TargetList& targets,
                                     const std::vector<diffdope::RefineResult>& results) {
   cv::Mat canvas;
   frame.observation.rgb.convertTo(canvas, CV_8UC3, 255.0);
@@ -17,7 +17,8 @@ void RefinerNodelet::publishOverlay(const Frame& frame, const std::vector<size_t
   if (!overlay_renderer_) overlay_renderer_ = diffdope::make_cpu_renderer(refiner_options_.render);
   diffdope::Renderer* renderer = overlay_renderer_.get();
   for (size_t k = 0; k < results.size(); ++k) {
-    const Slot& s = *slots_[slots[k]];
+    const Slot& s = *slots_[targets[k].first];
+    const std::string& name = s.instances[size_t(targets[k].second)].name;
     const diffdope::RefineResult& r = results[k];
     if (!r.error.empty()) continue;
     auto outline = [&](const diffdope::Pose& pose, const cv::Scalar& colour, int thickness) {
@@ -34,21 +35,21 @@ void RefinerNodelet::publishOverlay(const Frame& frame, const std::vector<size_t
     if (!(r.pose.t.z() > refiner_options_.render.near_plane)) continue;
     const Eigen::Vector2d c = frame.camera.project(r.pose.t);
     if (!c.allFinite() || std::abs(c.x()) > 1e5 || std::abs(c.y()) > 1e5) continue;
-    cv::putText(canvas, s.config.name + (r.plausible ? "" : " (implausible)"), cv::Point(int(c.x()), int(c.y())),
+    cv::putText(canvas, name + (r.plausible ? "" : " (implausible)"), cv::Point(int(c.x()), int(c.y())),
                 cv::FONT_HERSHEY_SIMPLEX, 0.5, cv::Scalar(255, 255, 255), 1, cv::LINE_AA);
   }
   overlay_pub_.publish(cv_bridge::CvImage(frame.header, sensor_msgs::image_encodings::BGR8, canvas).toImageMsg());
 }
 
-void RefinerNodelet::publishMarkers(const Frame& frame, const std::vector<size_t>& slots,
+void RefinerNodelet::publishMarkers(const Frame& frame, const TargetList& targets,
                                     const std::vector<diffdope::RefineResult>& results) {
   visualization_msgs::MarkerArray markers;
   for (size_t k = 0; k < results.size(); ++k) {
-    const Slot& s = *slots_[slots[k]];
+    const Slot& s = *slots_[targets[k].first];
     visualization_msgs::Marker m;
     m.header = frame.header;
     m.ns = "diffdope";
-    m.id = int(slots[k]);
+    m.id = int(targets[k].first) * diffdope::ObjectConfig::kMaxInstances + targets[k].second;  // one per instance
     m.type = visualization_msgs::Marker::MESH_RESOURCE;
     m.mesh_resource = s.config.mesh.rfind("package://", 0) == 0 ? s.config.mesh : "file://" + s.config.mesh_path;
     m.mesh_use_embedded_materials = true;

@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <geometry_msgs/PoseWithCovarianceStamped.h>
 
+#include "diffdope/instance_masks.hpp"
 #include "diffdope_ros/conversions.hpp"
 #include "diffdope_ros/refiner_nodelet.hpp"
 
@@ -84,11 +85,13 @@ void RefinerNodelet::applyPendingSettings() {
   if (!settings) return;
   try {
     if (refiner_) refiner_->set_options(settings->refiner);  // the same renderer: meshes stay cached
-    for (auto& slot : slots_) slot->track.set_options(settings->track);
+    for (auto& slot : slots_)
+      if (slot->tracks) slot->tracks->set_options(settings->track);
   } catch (const std::invalid_argument& e) {  // (checked by the callback already: a bug guard)
     errors_.error("reconfigure", std::string("reconfigured values not applied: ") + e.what());
     if (refiner_) refiner_->set_options(refiner_options_);
-    for (auto& slot : slots_) slot->track.set_options(track_options_);
+    for (auto& slot : slots_)
+      if (slot->tracks) slot->tracks->set_options(track_options_);
     return;
   }
   refiner_options_ = settings->refiner;
@@ -141,46 +144,65 @@ void RefinerNodelet::resetOnTimeJump(const Frame& frame) {
   if (!(back > 1.0)) return;  // frames arrive in order; a small step back is the synchronizer's approximation
   last_frame_stamp_ = stamp;
   for (auto& slot : slots_) {
-    slot->track.reset();
-    slot->tracking = false;
+    if (slot->tracks) slot->tracks->reset();
+    slot->tracking = 0;
   }
   errors_.warn("time", "time went back by " + format_fixed(back, 2) + " s (image stamped " + format_fixed(stamp) +
                            "; a looped bag or a restarted clock?): tracks and unused detections reset");
 }
 
 void RefinerNodelet::absorbDetections(const Frame& frame) {
-  std::vector<std::pair<size_t, geometry_msgs::PoseStamped>> pending;
+  std::vector<std::pair<size_t, std::vector<geometry_msgs::PoseStamped>>> pending;
   {
     std::lock_guard<std::mutex> lock(detections_mutex_);
     for (size_t i = 0; i < slots_.size(); ++i)
-      if (slots_[i]->pending_detection) {
-        pending.emplace_back(i, *slots_[i]->pending_detection);
-        slots_[i]->pending_detection.reset();
+      if (slots_[i]->pending_detections) {
+        pending.emplace_back(i, std::move(*slots_[i]->pending_detections));
+        slots_[i]->pending_detections.reset();
       }
   }
-  for (auto& [i, msg] : pending) {
+  for (auto& [i, msgs] : pending) {
     Slot& s = *slots_[i];
-    if (!s.mesh) continue;
-    try {
-      const double stamp = msg.header.stamp.isZero() ? frame.header.stamp.toSec() : msg.header.stamp.toSec();
-      s.track.add_detection(meshPoseInCamera(msg, s, frame), stamp);
-    } catch (const std::exception& e) {
-      errors_.error("pose/" + s.config.name, std::string("initial pose ignored: ") + e.what());
+    if (!s.tracks) continue;
+    std::vector<diffdope::Pose> poses;
+    double stamp = frame.header.stamp.toSec();
+    for (const auto& msg : msgs) {
+      try {
+        poses.push_back(meshPoseInCamera(msg, s, frame));
+        if (poses.size() == 1 && !msg.header.stamp.isZero()) stamp = msg.header.stamp.toSec();  // (one message)
+      } catch (const std::exception& e) {
+        errors_.error("pose/" + s.config.name, std::string("initial pose ignored: ") + e.what());
+      }
+    }
+    const std::vector<int> instance = s.tracks->add_detections(poses, stamp);
+    const long extra = long(std::count(instance.begin(), instance.end(), -1));
+    if (extra > 0) {
+      errors_.warn("instances/" + s.config.name,
+                   std::to_string(extra) + " detection(s) of '" + s.config.name + "' beyond its max_instances (" +
+                       std::to_string(s.config.max_instances) + ") ignored: every instance already had one");
+      std::lock_guard<std::mutex> lock(work_mutex_);
+      stats_.extra_detections += extra;
     }
   }
   // A detection too old for this frame can never be used (frames only get newer): say so, with both stamps
   // (a detector stamping with another clock, e.g. wall time under sim time, shows up here).
   const double image_stamp = frame.header.stamp.toSec();
   for (auto& slot : slots_)
-    if (auto stale = slot->track.take_stale_detection(image_stamp))
-      errors_.error("pose/" + slot->config.name,
-                    "initial pose of '" + slot->config.name + "' ignored: stamped " + format_fixed(stale->stamp) +
-                        ", more than ~max_detection_age (" + format_fixed(track_options_.max_detection_age, 1) +
-                        " s) before the image at " + format_fixed(image_stamp));
+    for (int k = 0; slot->tracks && k < slot->tracks->size(); ++k)
+      if (auto stale = slot->tracks->track(k).take_stale_detection(image_stamp))
+        errors_.error("pose/" + slot->config.name,
+                      "initial pose of '" + slot->instances[size_t(k)].name + "' ignored: stamped " +
+                          format_fixed(stale->stamp) + ", more than ~max_detection_age (" +
+                          format_fixed(track_options_.max_detection_age, 1) + " s) before the image at " +
+                          format_fixed(image_stamp));
 }
 
 void RefinerNodelet::updateTrackingFlags(double stamp) {
-  for (auto& slot : slots_) slot->tracking = slot->mesh && slot->track.tracking(stamp);
+  for (auto& slot : slots_) {
+    int n = 0;
+    for (int k = 0; slot->tracks && k < slot->tracks->size(); ++k) n += slot->tracks->track(k).tracking(stamp);
+    slot->tracking = n;
+  }
 }
 
 void RefinerNodelet::processStreaming(const std::shared_ptr<const Frame>& frame) {
@@ -189,11 +211,11 @@ void RefinerNodelet::processStreaming(const std::shared_ptr<const Frame>& frame)
   absorbDetections(*frame);
   SeedList seeds;
   const double stamp = frame->header.stamp.toSec();
-  for (size_t i = 0; i < slots_.size(); ++i) {
-    if (!slots_[i]->mesh) continue;
-    auto starts = slots_[i]->track.seeds_for(stamp);
-    if (!starts.empty()) seeds.emplace_back(i, std::move(starts));
-  }
+  for (size_t i = 0; i < slots_.size(); ++i)
+    for (int k = 0; slots_[i]->tracks && k < slots_[i]->tracks->size(); ++k) {
+      auto starts = slots_[i]->tracks->track(k).seeds_for(stamp);
+      if (!starts.empty()) seeds.push_back({i, k, std::move(starts)});
+    }
   std::vector<std::string> skipped;
   if (!seeds.empty()) refineAndPublish(*frame, seeds, refiner_options_, &skipped);
   updateTrackingFlags(stamp);
@@ -248,54 +270,58 @@ diffdope_ros::Refine::Response RefinerNodelet::processRequest(const diffdope_ros
   resetOnTimeJump(*frame);
   absorbDetections(*frame);
   const double stamp = frame->header.stamp.toSec();
-  SeedList seeds;
-  std::vector<bool> chosen(slots_.size(), false);
+  // The request's own poses, per object: several of one object are its instances (matched to the tracked ones
+  // by proximity, else new ones).
+  std::map<size_t, std::vector<diffdope::Pose>> requested;
   for (const auto& p : req.initial_poses) {
     const size_t i = size_t(find(p.name));
-    if (chosen[i]) return fail("object '" + p.name + "' has two initial poses in the request");
     try {
-      seeds.emplace_back(i, std::vector<diffdope::Seed>{diffdope::Seed{
-                                meshPoseInCamera(p.pose, *slots_[i], *frame), diffdope::SeedSource::kRequest, stamp}});
+      requested[i].push_back(meshPoseInCamera(p.pose, *slots_[i], *frame));
     } catch (const std::exception& e) {
       return fail(e.what());
     }
-    chosen[i] = true;
   }
-  // Check that every named object has a start before taking any detection (a failed request uses none up).
+  SeedList seeds;
+  std::vector<std::vector<bool>> chosen(slots_.size());  // per object and instance: already has its start
+  for (size_t i = 0; i < slots_.size(); ++i) chosen[i].assign(size_t(slots_[i]->config.max_instances), false);
+  for (const auto& [i, poses] : requested) {
+    const Slot& s = *slots_[i];
+    if (int(poses.size()) > s.config.max_instances)
+      return fail("object '" + s.config.name + "' has " + std::to_string(poses.size()) +
+                  " initial poses in the request but max_instances " + std::to_string(s.config.max_instances) +
+                  " in the objects config");
+    const std::vector<int> instance = s.tracks->assign(poses, stamp);
+    for (size_t j = 0; j < poses.size(); ++j) {
+      const int k = instance[j];  // (never -1: no more poses than instances)
+      seeds.push_back({i, k, {diffdope::Seed{poses[j], diffdope::SeedSource::kRequest, stamp}}});
+      chosen[i][size_t(k)] = true;
+    }
+  }
+  // Every other instance the request refines: of the named objects, or of all when it names none, those with a
+  // start (detection or track). Checked before any detection is used up: a failed request uses none.
+  const bool everything = req.object_names.empty() && req.initial_poses.empty();
+  std::vector<bool> named(slots_.size(), everything);
+  for (const auto& n : req.object_names) named[size_t(find(n))] = true;
+  std::vector<std::pair<size_t, int>> known;
   std::vector<std::string> missing;
-  for (const auto& n : req.object_names) {
-    const size_t i = size_t(find(n));
-    if (!chosen[i] && !slots_[i]->track.peek(stamp)) missing.push_back(n);
+  for (size_t i = 0; i < slots_.size(); ++i) {
+    if (!named[i] || !slots_[i]->tracks) continue;
+    bool any = requested.count(i) > 0;
+    for (int k = 0; k < slots_[i]->tracks->size(); ++k)
+      if (!chosen[i][size_t(k)] && slots_[i]->tracks->track(k).peek(stamp)) known.emplace_back(i, k), any = true;
+    if (!any && !everything) missing.push_back(slots_[i]->config.name);
   }
   if (!missing.empty())
     return fail("no initial pose for " + join(missing) + " (no recent detection or track); pass initial_poses");
-  // The time budget, before any detection is used up: every object the request will refine has a start by now.
-  std::vector<bool> refined = chosen;
-  for (const auto& n : req.object_names) refined[size_t(find(n))] = true;
-  if (req.object_names.empty() && req.initial_poses.empty())
-    for (size_t i = 0; i < slots_.size(); ++i) refined[i] = slots_[i]->mesh && slots_[i]->track.peek(stamp);
-  const int objects = int(std::count(refined.begin(), refined.end(), true));
-  if (const std::string why = diffdope::check_request_time(options, objects, refine_time_, max_request_time_);
+  // The time budget, before any detection is used up.
+  const int targets = int(seeds.size() + known.size());
+  if (const std::string why = diffdope::check_request_time(options, targets, refine_time_, max_request_time_);
       !why.empty())
     return fail(why);
-  if (req.object_names.empty() && req.initial_poses.empty()) {
-    for (size_t i = 0; i < slots_.size(); ++i)
-      if (slots_[i]->mesh)
-        if (auto starts = slots_[i]->track.seeds_for(stamp); !starts.empty()) {
-          seeds.emplace_back(i, std::move(starts));
-          chosen[i] = true;
-        }
-    if (seeds.empty()) return fail("no object has a known pose (no recent detection or track); pass initial_poses");
-  } else {
-    for (const auto& n : req.object_names) {
-      const size_t i = size_t(find(n));
-      if (chosen[i]) continue;
-      if (auto starts = slots_[i]->track.seeds_for(stamp); !starts.empty()) {
-        seeds.emplace_back(i, std::move(starts));
-        chosen[i] = true;
-      }
-    }
-  }
+  for (const auto& [i, k] : known)
+    if (auto starts = slots_[i]->tracks->track(k).seeds_for(stamp); !starts.empty())
+      seeds.push_back({i, k, std::move(starts)});
+  if (seeds.empty()) return fail("no object has a known pose (no recent detection or track); pass initial_poses");
   std::vector<std::string> skipped;
   res.results = refineAndPublish(*frame, seeds, options, &skipped);
   updateTrackingFlags(stamp);
@@ -313,11 +339,32 @@ std::vector<diffdope_ros::RefinedPose> RefinerNodelet::refineAndPublish(
     std::vector<std::string>* skipped) {
   const ros::WallTime start = ros::WallTime::now();
   std::vector<diffdope::ObjectTarget> targets;
-  std::vector<size_t> slot_of, seeds_of;
+  TargetList target_of;  // (slot, instance) per target
+  std::vector<size_t> seeds_of;
   std::vector<diffdope_ros::RefinedPose> out;
+  // An object's mask, split among its instances refined on this frame (one label for all of them).
+  std::map<size_t, std::vector<cv::Mat>> instance_masks;
+  if (!frame.labels.empty()) {
+    std::map<size_t, std::vector<size_t>> of_object;
+    for (size_t n = 0; n < seeds.size(); ++n) of_object[seeds[n].slot].push_back(n);
+    for (const auto& [i, list] : of_object) {
+      const Slot& s = *slots_[i];
+      const cv::Mat mask = object_mask(frame.labels, s.config.mask_label);
+      if (s.config.max_instances == 1) {
+        instance_masks[i] = {mask};
+        continue;
+      }
+      std::vector<diffdope::Pose> starts;
+      for (size_t n : list) starts.push_back(seeds[n].starts.front().pose);
+      instance_masks[i] =
+          diffdope::split_mask_among_instances(mask, frame.camera, *s.mesh, starts, options.no_mask_window);
+    }
+  }
+  std::map<size_t, size_t> used_masks;  // per object: how many of its split masks are taken
   for (size_t n = 0; n < seeds.size(); ++n) {
-    const auto& [i, starts] = seeds[n];
+    const auto& [i, k, starts] = seeds[n];
     Slot& s = *slots_[i];
+    const Instance& in = s.instances[size_t(k)];
     diffdope::ObjectTarget t;
     t.mesh = s.mesh.get();
     t.initial = starts.front().pose;
@@ -327,18 +374,18 @@ std::vector<diffdope_ros::RefinedPose> RefinerNodelet::refineAndPublish(
     t.explore = starts.front().source == diffdope::SeedSource::kDetector ||
                 starts.front().source == diffdope::SeedSource::kRequest;
     if (!frame.labels.empty()) {
-      t.mask = object_mask(frame.labels, s.config.mask_label);
+      t.mask = instance_masks[i][used_masks[i]++];
       if (cv::countNonZero(t.mask) == 0) {
         // The segmentation says the object is not visible: refining against an empty mask would push it away.
-        errors_.warn("empty_mask_" + s.config.name, "object '" + s.config.name + "' has no pixels in the mask (label " +
-                                                        std::to_string(s.config.mask_label) + "): not refined");
-        if (s.track.report(t.initial, false, frame.header.stamp.toSec())) reportLostTrack(s);
-        if (skipped) skipped->push_back(s.config.name + " (no pixels with its label in the mask)");
+        errors_.warn("empty_mask_" + in.name, "object '" + in.name + "' has no pixels in the mask (label " +
+                                                  std::to_string(s.config.mask_label) + "): not refined");
+        if (s.tracks->report(k, t.initial, false, frame.header.stamp.toSec())) reportLostTrack(s, k);
+        if (skipped) skipped->push_back(in.name + " (no pixels with its label in the mask)");
         continue;
       }
     }
     targets.push_back(t);
-    slot_of.push_back(i);
+    target_of.emplace_back(i, k);
     seeds_of.push_back(n);
   }
   if (targets.empty()) {
@@ -360,23 +407,27 @@ std::vector<diffdope_ros::RefinedPose> RefinerNodelet::refineAndPublish(
   array.header = frame.header;
   std::vector<geometry_msgs::TransformStamped> transforms;
   int implausible = 0;
-  for (size_t k = 0; k < results.size(); ++k) {
-    Slot& s = *slots_[slot_of[k]];
-    const diffdope::RefineResult& r = results[k];
-    const std::vector<diffdope::Seed>& starts = seeds[seeds_of[k]].second;
+  for (size_t n = 0; n < results.size(); ++n) {
+    const auto [i, k] = target_of[n];
+    Slot& s = *slots_[i];
+    Instance& in = s.instances[size_t(k)];
+    diffdope::ObjectTrack& track = s.tracks->track(k);
+    const diffdope::RefineResult& r = results[n];
+    const std::vector<diffdope::Seed>& starts = seeds[seeds_of[n]].starts;
     if (!r.error.empty()) {
-      errors_.error("refine_" + s.config.name, "object '" + s.config.name + "' not refined: " + r.error);
-      if (skipped) skipped->push_back(s.config.name + " (" + r.error + ")");
-      if (s.track.report(starts.front().pose, false, frame.header.stamp.toSec())) reportLostTrack(s);
+      errors_.error("refine_" + in.name, "object '" + in.name + "' not refined: " + r.error);
+      if (skipped) skipped->push_back(in.name + " (" + r.error + ")");
+      if (s.tracks->report(k, starts.front().pose, false, frame.header.stamp.toSec())) reportLostTrack(s, k);
       continue;
     }
     const diffdope::Seed& seed = starts[std::min<size_t>(size_t(r.start), starts.size() - 1)];
-    const diffdope::Pose refined = s.track.reported_pose(r.pose, s.mesh->symmetry);  // no spin / flip (symmetry)
-    if (s.track.report(refined, r.plausible, frame.header.stamp.toSec())) reportLostTrack(s);
+    const diffdope::Pose refined = track.reported_pose(r.pose, s.mesh->symmetry);  // no spin / flip (symmetry)
+    if (s.tracks->report(k, refined, r.plausible, frame.header.stamp.toSec())) reportLostTrack(s, k);
     implausible += !r.plausible;
     const diffdope::Pose inv_model = s.config.model_transform.inverse();
     diffdope_ros::RefinedPose p;
     p.name = s.config.name;
+    p.instance = k;
     p.pose.header = frame.header;
     p.pose.pose = pose_to_msg(refined * inv_model);
     p.initial_pose = pose_to_msg(seed.pose * inv_model);
@@ -392,22 +443,22 @@ std::vector<diffdope_ros::RefinedPose> RefinerNodelet::refineAndPublish(
     p.time_ms = r.time_ms;
     out.push_back(p);
     if (!r.plausible && !publish_implausible_) continue;  // scores still go out in ~refined_poses
-    s.pose_pub.publish(p.pose);
+    in.pose_pub.publish(p.pose);
     if (r.curvature.valid) {  // the pose with the covariance the loss's curvature gives (pose_curvature.hpp)
       geometry_msgs::PoseWithCovarianceStamped c;
       c.header = p.pose.header;
       c.pose.pose = p.pose.pose;
       const diffdope::Matrix6d cov =
           diffdope::covariance_at_origin(r.covariance, r.pivot, (refined * inv_model).t);
-      for (int i = 0; i < 6; ++i)
-        for (int j = 0; j < 6; ++j) c.pose.covariance[size_t(6 * i + j)] = cov(i, j);
-      s.cov_pub.publish(c);
+      for (int a = 0; a < 6; ++a)
+        for (int b = 0; b < 6; ++b) c.pose.covariance[size_t(6 * a + b)] = cov(a, b);
+      in.cov_pub.publish(c);
     }
-    if (s.last_tf_stamp == frame.header.stamp) continue;  // already on TF for this image: listeners keep the first
-    s.last_tf_stamp = frame.header.stamp;
+    if (in.last_tf_stamp == frame.header.stamp) continue;  // already on TF for this image: listeners keep the first
+    in.last_tf_stamp = frame.header.stamp;
     geometry_msgs::TransformStamped t;
     t.header = frame.header;
-    t.child_frame_id = frame_prefix_ + s.config.name;
+    t.child_frame_id = frame_prefix_ + in.name;
     t.transform = transform_to_msg(refined * inv_model);
     transforms.push_back(t);
   }
@@ -432,18 +483,18 @@ std::vector<diffdope_ros::RefinedPose> RefinerNodelet::refineAndPublish(
     stats_.cost_measured = refine_time_.observations() > 0;
   }
   try {  // visualisation must never cost the refinement its result
-    if (overlay_pub_.getNumSubscribers() > 0) publishOverlay(frame, slot_of, results);
-    if (markers_pub_.getNumSubscribers() > 0) publishMarkers(frame, slot_of, results);
+    if (overlay_pub_.getNumSubscribers() > 0) publishOverlay(frame, target_of, results);
+    if (markers_pub_.getNumSubscribers() > 0) publishMarkers(frame, target_of, results);
   } catch (const std::exception& e) {
     errors_.error("visualisation", std::string("overlay/markers not published: ") + e.what());
   }
   return out;
 }
 
-void RefinerNodelet::reportLostTrack(const Slot& s) {
-  errors_.warn("lost_" + s.config.name, "lost track of '" + s.config.name + "' (" +
-                                            std::to_string(track_options_.max_failures) +
-                                            " implausible refinements in a row); waiting for a detection");
+void RefinerNodelet::reportLostTrack(const Slot& s, int instance) {
+  const std::string& name = s.instances[size_t(instance)].name;
+  errors_.warn("lost_" + name, "lost track of '" + name + "' (" + std::to_string(track_options_.max_failures) +
+                                   " implausible refinements in a row); waiting for a detection");
 }
 
 }  // namespace diffdope_ros

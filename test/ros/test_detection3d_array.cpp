@@ -97,27 +97,30 @@ TEST(Detection3DArray, HostileCountsAndValuesAreRefusedByName) {
   }
 }
 
-TEST(Detection3DArray, EachObjectGetsItsBestDetectionByClassId) {
+TEST(Detection3DArray, EachObjectGetsItsDetectionsByClassIdBestFirst) {
   const std::vector<uint8_t> b = two_detections();
   const auto m = decode_detection3d_array(b.data(), b.size());
   // Class 1 is the box; class 3 is nobody's here.
   auto chosen = diffdope_ros::select_detections(m, {{"box", 1}, {"mug", 2}});
   ASSERT_EQ(chosen.by_object.size(), 1u);
-  EXPECT_DOUBLE_EQ(chosen.by_object.at("box").pose.position.x, 0.1);
-  EXPECT_EQ(chosen.by_object.at("box").header.frame_id, "camera_color_optical_frame");
-  EXPECT_EQ(chosen.by_object.at("box").header.stamp, ros::Time(1000, 500));
+  ASSERT_EQ(chosen.by_object.at("box").size(), 1u);
+  EXPECT_DOUBLE_EQ(chosen.by_object.at("box")[0].pose.position.x, 0.1);
+  EXPECT_EQ(chosen.by_object.at("box")[0].header.frame_id, "camera_color_optical_frame");
+  EXPECT_EQ(chosen.by_object.at("box")[0].header.stamp, ros::Time(1000, 500));
   EXPECT_EQ(chosen.unknown_class_ids, std::vector<int64_t>{3});
   // Class 3 as the mug: of its two hypotheses the better one (score 0.7, x = -0.12).
   chosen = diffdope_ros::select_detections(m, {{"box", 1}, {"mug", 3}});
   ASSERT_EQ(chosen.by_object.size(), 2u);
-  EXPECT_DOUBLE_EQ(chosen.by_object.at("mug").pose.position.x, -0.12);
+  ASSERT_EQ(chosen.by_object.at("mug").size(), 1u);  // one detection, its best hypothesis
+  EXPECT_DOUBLE_EQ(chosen.by_object.at("mug")[0].pose.position.x, -0.12);
   EXPECT_TRUE(chosen.unknown_class_ids.empty());
-  // Two detections of one object: the higher score, the other counted.
+  // Two detections of one object (two instances): both, the higher score first.
   diffdope_ros::DecodedDetectionArray twice = m;
   twice.detections[1].results = {m.detections[0].results[0]};
   twice.detections[1].results[0].score = 0.95;
   twice.detections[1].results[0].pose.t.x() = 0.3;
   chosen = diffdope_ros::select_detections(twice, {{"box", 1}});
-  EXPECT_EQ(chosen.extra_instances, 1);
-  EXPECT_DOUBLE_EQ(chosen.by_object.at("box").pose.position.x, 0.3);
+  ASSERT_EQ(chosen.by_object.at("box").size(), 2u);
+  EXPECT_DOUBLE_EQ(chosen.by_object.at("box")[0].pose.position.x, 0.3);
+  EXPECT_DOUBLE_EQ(chosen.by_object.at("box")[1].pose.position.x, 0.1);
 }

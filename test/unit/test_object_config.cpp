@@ -79,6 +79,7 @@ objects:
   - name: soup
     mesh: /abs/soup.obj
     symmetric: true
+    max_instances: 3
 )";
 
 }  // namespace
@@ -103,6 +104,10 @@ TEST(ObjectConfig, ParsesEveryKey) {
   EXPECT_EQ(b.name, "soup");
   EXPECT_EQ(b.mesh_path, "/abs/soup.obj");
   EXPECT_TRUE(b.symmetric);
+  EXPECT_EQ(b.max_instances, 3);
+  EXPECT_EQ(instance_name(b, 0), "soup_0");
+  EXPECT_EQ(instance_name(b, 2), "soup_2");
+  EXPECT_EQ(instance_name(a, 0), "cracker_box");  // one instance: the object's own name
 
   // The refiner section overrides only the keys it names.
   EXPECT_EQ(cfg.refiner.iterations, 7);
@@ -117,6 +122,7 @@ TEST(ObjectConfig, Defaults) {
   EXPECT_DOUBLE_EQ(o.mesh_scale, 1.0);
   EXPECT_FALSE(o.symmetric);
   EXPECT_EQ(o.mask_label, -1);
+  EXPECT_EQ(o.max_instances, 1);
   EXPECT_TRUE(o.pose_topic.empty());
   EXPECT_TRUE(o.model_transform.R.isIdentity());
   EXPECT_TRUE(o.model_transform.t.isZero());
@@ -228,6 +234,11 @@ TEST(ObjectConfig, ErrorsNameTheProblem) {
       {"NaN scale", "objects:\n  - {name: a, mesh: a.ply, mesh_scale: .nan}\n", {"'a'", "mesh_scale"}},
       {"text scale", "objects:\n  - {name: a, mesh: a.ply, mesh_scale: big}\n", {"objects[0]"}},
       {"bad mask label", "objects:\n  - {name: a, mesh: a.ply, mask_label: -2}\n", {"'a'", "mask_label"}},
+      {"no instances", "objects:\n  - {name: a, mesh: a.ply, max_instances: 0}\n", {"'a'", "max_instances"}},
+      {"too many instances", "objects:\n  - {name: a, mesh: a.ply, max_instances: 33}\n", {"'a'", "max_instances"}},
+      {"instance name taken",
+       "objects:\n  - {name: a, mesh: a.ply, max_instances: 2}\n  - {name: a_1, mesh: b.ply}\n",
+       {"'a_1'", "instance 1 of 'a'"}},
       {"zero quaternion",
        "objects:\n  - name: a\n    mesh: a.ply\n    model_transform:\n      rotation: [0, 0, 0, 0]\n",
        {"objects[0]", "model_transform", "rotation", "zero quaternion"}},
