@@ -147,4 +147,16 @@ class Mesh {
 /// is written. Throws std::runtime_error naming the file.
 void save_ply(const Mesh& mesh, const std::string& path, double units_per_metre);
 
+/// A mesh placed in a common frame: `pose` maps its model frame into that frame; `scale` multiplies its
+/// coordinates first (per axis, as a URDF mesh's scale).
+struct MeshPart {
+  const Mesh* mesh = nullptr;
+  Pose pose;
+  Eigen::Vector3d scale = Eigen::Vector3d::Ones();
+};
+/// One finalized mesh of all parts (vertices moved, textures and colours kept): e.g. a robot's link meshes at one
+/// joint configuration, in its base frame. A negative scale's mirror keeps the triangles' outward winding.
+/// Throws std::runtime_error when there is no part or a part has no mesh.
+Mesh merge_meshes(const std::vector<MeshPart>& parts, const std::string& name);
+
 }  // namespace diffdope

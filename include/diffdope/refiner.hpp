@@ -138,6 +138,11 @@ struct RefineResult {
   Matrix6d covariance = Matrix6d::Zero();
   Eigen::Vector3d pivot = Eigen::Vector3d::Zero();  // the object's centre at the refined pose (camera frame)
   std::string error;                  // refine_all(): why this object could not be refined (empty = refined)
+  /// refine_views(): each view's scores at the result (loss at image_scale; -1 = not available).
+  struct ViewScores {
+    double loss = 0, mask_iou = -1, depth_inliers = -1;
+  };
+  std::vector<ViewScores> view_scores;
 };
 
 /// One object of a frame for Refiner::refine_all().
@@ -147,6 +152,17 @@ struct ObjectTarget {
   cv::Mat mask;  // this object's visible mask (CV_32FC1, or any type to_mask_float takes); may be empty
   std::vector<Pose> alternatives;  // further initial poses; the runs are shared out among all of them
   bool explore = true;  // false: no shape scan (explore_tolerance), e.g. a tracked start to stay on
+};
+
+class RefineRun;  // (src/core/refine_run.hpp)
+
+/// One view of a rigid target for Refiner::refine_views(): a camera, its images and the mesh as it is in that
+/// view. Every view has the same pose (model -> camera) and the same camera frame: e.g. captures of a robot by
+/// one static camera, each with the robot's links placed as in that capture (calibration.hpp).
+struct RefineView {
+  Camera camera;
+  Observation observed;  // rgb and / or depth, optional mask (all views have one or none)
+  const Mesh* mesh = nullptr;
 };
 
 class Refiner {
@@ -172,6 +188,13 @@ class Refiner {
   RefineResult refine(const Camera& camera, const Observation& observed, const Mesh& mesh,
                       const std::vector<Pose>& initials);
 
+  /// Refines one pose seen in several views (the same algorithm; each hypothesis' loss and gradient are the mean
+  /// over the views). No shape scan; `pivot_model` (model frame) is the point the steps turn about, e.g. the
+  /// centre of what the views show. RefineResult::view_scores holds each view's scores; mask_iou /
+  /// depth_inliers and the verdict are the weakest view's; no print registration or curvature probe.
+  RefineResult refine_views(const std::vector<RefineView>& views, const std::vector<Pose>& initials,
+                            const Eigen::Vector3d& pivot_model);
+
   /// Refines every object of one frame (the frame's rgb and depth, each object's own mask). An object whose
   /// input is unusable gets its reason in RefineResult::error (pose = initial, plausible = false); the others
   /// are still refined. The objects run in lockstep: each iteration evaluates the runs of all objects in one
@@ -188,6 +211,8 @@ class Refiner {
  private:
   /// The model-frame turns the shape scan tries for `mesh` (none when not exploring).
   std::vector<Pose> shape_turns(const Mesh& mesh, bool explore);
+  /// The refinement loop of one run (refine(), refine_views()); refine_all() steps several in lockstep.
+  RefineResult drive(RefineRun& run);
 
   RefinerOptions options_;
   std::unique_ptr<Renderer> renderer_;

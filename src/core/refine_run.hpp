@@ -13,14 +13,20 @@ namespace diffdope {
 class RefineRun {
  public:
   /// Validates the input and prepares the scaled images, the loss and the learning rates. Throws
-  /// std::invalid_argument on unusable input (as Refiner::refine()). `scaled_frame` (refine_all): the frame's
-  /// rgb / depth / edges already at the refiner's scale, shared by the objects; then only the mask is resized.
-  /// `coarse_frame` likewise at image_scale * coarse_scale (see RefinerOptions::coarse_fraction).
-  /// `shape_turns`: the model-frame turns the shape scan tries on every run (RefinerOptions::explore_tolerance;
-  /// empty: no scan).
+  /// std::invalid_argument on unusable input (as Refiner::refine()). `views`: one for an object; several share
+  /// the pose (Refiner::refine_views()). `scaled_frame` (refine_all, one view): the frame's rgb / depth / edges
+  /// already at the refiner's scale, shared by the objects; then only the mask is resized. `coarse_frame`
+  /// likewise at image_scale * coarse_scale (see RefinerOptions::coarse_fraction). `shape_turns`: the
+  /// model-frame turns the shape scan tries on every run (RefinerOptions::explore_tolerance; empty: no scan).
+  /// `pivot_model`: the model point the steps turn about (null: the first view's mesh centre).
+  RefineRun(const RefinerOptions& options, const std::vector<RefineView>& views, const std::vector<Pose>& initials,
+            std::vector<Pose> shape_turns = {}, const Observation* scaled_frame = nullptr,
+            const Observation* coarse_frame = nullptr, const Eigen::Vector3d* pivot_model = nullptr);
   RefineRun(const RefinerOptions& options, const Camera& camera, const Observation& observed, const Mesh& mesh,
             const std::vector<Pose>& initials, std::vector<Pose> shape_turns = {},
-            const Observation* scaled_frame = nullptr, const Observation* coarse_frame = nullptr);
+            const Observation* scaled_frame = nullptr, const Observation* coarse_frame = nullptr)
+      : RefineRun(options, {RefineView{camera, observed, &mesh}}, initials, std::move(shape_turns), scaled_frame,
+                  coarse_frame) {}
 
   bool done() const { return done_; }
   /// The poses to evaluate this iteration (the active runs; during the shape scan, each turned by every
@@ -31,27 +37,34 @@ class RefineRun {
   /// Takes this iteration's values for batch(), keeps each run's best and steps the runs (after the scan: turns
   /// each run to its best turned pose, without a step).
   void absorb(const std::vector<LossValue>& values, const std::function<void(int, int, double)>& on_iteration);
-  /// Winner and quality scores (renders the refined pose once).
+  /// Evaluates `poses` in every view at this iteration's scale (`fine`: at the fine scale) and gives each pose
+  /// the mean over the views (terms, total and gradient: the views share the camera frame the gradient is in).
+  void evaluate(Renderer& renderer, const std::vector<Pose>& poses, const LossOptions& loss, bool with_gradient,
+                std::vector<LossValue>& out, bool fine = false);
+  /// Winner and quality scores (renders the refined pose once per view).
   RefineResult finish(Renderer& renderer);
 
-  /// The camera and images of this iteration (coarse, then fine).
-  const Camera& camera() const { return coarse() ? coarse_.cam : fine_.cam; }
-  const Observation& observation() const { return coarse() ? coarse_.obs : fine_.obs; }
+  /// The camera and images of view `v` at this iteration (coarse, then fine).
+  const Camera& camera(size_t v = 0) const { return coarse() ? coarse_[v].cam : fine_[v].cam; }
+  const Observation& observation(size_t v = 0) const { return coarse() ? coarse_[v].obs : fine_[v].obs; }
   bool coarse() const { return k_ < switch_at_; }
   /// The loss of this iteration's batch() (the scan's adds the texture term; call after batch()).
   const LossOptions& loss() const { return scanning_ ? scan_loss_ : loss_; }
-  const Mesh& mesh() const { return mesh_; }
+  const Mesh& mesh(size_t v = 0) const { return *meshes_[v]; }
+  size_t views() const { return meshes_.size(); }
 
  private:
   const RefinerOptions& options_;
-  const Mesh& mesh_;
+  std::vector<const Mesh*> meshes_;  // per view
+  Eigen::Vector3d pivot_model_;      // model point the steps turn about
   std::chrono::steady_clock::time_point start_time_;
   std::vector<Pose> initials_;
   struct Level {
     Camera cam;
     Observation obs;
   };
-  Level fine_, coarse_;
+  std::vector<Level> fine_, coarse_;  // per view
+  std::vector<std::vector<LossValue>> view_values_;  // evaluate()'s scratch
   int switch_at_ = 0;  // first iteration at the fine scale (0: no coarse phase)
   LossOptions loss_, scan_loss_;
   bool has_mask_ = false;

@@ -119,13 +119,46 @@ RefineResult Refiner::refine(const Camera& camera, const Observation& observed, 
 RefineResult Refiner::refine(const Camera& camera, const Observation& observed, const Mesh& mesh,
                              const std::vector<Pose>& initials) {
   RefineRun run(options_, camera, observed, mesh, initials, shape_turns(mesh, true));
+  return drive(run);
+}
+
+RefineResult Refiner::refine_views(const std::vector<RefineView>& views, const std::vector<Pose>& initials,
+                                   const Eigen::Vector3d& pivot_model) {
+  if (!pivot_model.allFinite()) throw std::invalid_argument("refine_views: the pivot is not finite");
+  RefineRun run(options_, views, initials, {}, nullptr, nullptr, &pivot_model);
+  return drive(run);
+}
+
+RefineResult Refiner::drive(RefineRun& run) {
   std::vector<LossValue> values;
   while (!run.done()) {
     const std::vector<Pose>& poses = run.batch();  // (before with_gradient() and loss(): a scan differs)
-    renderer_->evaluate(run.camera(), mesh, run.observation(), poses, run.loss(), run.with_gradient(), values);
+    run.evaluate(*renderer_, poses, run.loss(), run.with_gradient(), values);
     run.absorb(values, on_iteration);
   }
   return run.finish(*renderer_);
+}
+
+void RefineRun::evaluate(Renderer& renderer, const std::vector<Pose>& poses, const LossOptions& loss,
+                         bool with_gradient, std::vector<LossValue>& out, bool fine) {
+  const auto level = [&](size_t v) -> const Level& { return fine || !coarse() ? fine_[v] : coarse_[v]; };
+  if (meshes_.size() == 1) {
+    renderer.evaluate(level(0).cam, *meshes_[0], level(0).obs, poses, loss, with_gradient, out);
+    return;
+  }
+  view_values_.resize(meshes_.size());
+  for (size_t v = 0; v < meshes_.size(); ++v)
+    renderer.evaluate(level(v).cam, *meshes_[v], level(v).obs, poses, loss, with_gradient, view_values_[v]);
+  out.assign(poses.size(), LossValue());
+  const double w = 1.0 / double(meshes_.size());
+  for (size_t j = 0; j < poses.size(); ++j)
+    for (const std::vector<LossValue>& vv : view_values_) {
+      const LossValue& x = vv[j];
+      LossValue& y = out[j];
+      y.rgb += w * x.rgb, y.depth += w * x.depth, y.mask += w * x.mask, y.edges += w * x.edges;
+      y.texture += w * x.texture, y.total += w * x.total;
+      y.gradient += w * x.gradient;
+    }
 }
 
 std::vector<Pose> Refiner::shape_turns(const Mesh& mesh, bool explore) {
@@ -172,23 +205,33 @@ void check_in_view(const Camera& cam, const Mesh& mesh, const Pose& pose, double
 
 }  // namespace
 
-RefineRun::RefineRun(const RefinerOptions& o, const Camera& camera, const Observation& observed, const Mesh& mesh,
-                     const std::vector<Pose>& initials, std::vector<Pose> shape_turns,
-                     const Observation* scaled_frame, const Observation* coarse_frame)
-    : options_(o), mesh_(mesh), start_time_(std::chrono::steady_clock::now()), initials_(initials),
-      turns_(std::move(shape_turns)) {
-  observed.validate(camera);
-  if (!observed.has_rgb() && !observed.has_depth())
-    throw std::invalid_argument("refine: need at least an rgb or a depth image");
+RefineRun::RefineRun(const RefinerOptions& o, const std::vector<RefineView>& views, const std::vector<Pose>& initials,
+                     std::vector<Pose> shape_turns, const Observation* scaled_frame, const Observation* coarse_frame,
+                     const Eigen::Vector3d* pivot_model)
+    : options_(o), start_time_(std::chrono::steady_clock::now()), initials_(initials), turns_(std::move(shape_turns)) {
+  if (views.empty()) throw std::invalid_argument("refine: no view");
+  if (views.size() > 1 && (scaled_frame || coarse_frame)) throw std::logic_error("RefineRun: shared frames of one view");
   if (initials.empty()) throw std::invalid_argument("refine: no initial pose");
-  for (const Pose& initial : initials) {
-    if (!initial.is_valid(1e-4))
-      throw std::invalid_argument("refine: initial pose is not finite or its rotation is not orthonormal");
-    const Eigen::Vector3d centre0 = initial * mesh.center();
-    if (!(centre0.z() > o.render.near_plane))
-      throw std::invalid_argument("refine: initial pose puts the object behind the camera (z = " +
-                                  std::to_string(centre0.z()) + " m)");
-    check_in_view(scaled_camera(camera, o.image_scale), mesh, initial, o.render.near_plane);
+  has_mask_ = views.front().observed.has_mask();
+  for (size_t v = 0; v < views.size(); ++v) {
+    const RefineView& view = views[v];
+    const std::string which = views.size() > 1 ? " (view " + std::to_string(v) + ")" : "";
+    if (!view.mesh) throw std::invalid_argument("refine: no mesh" + which);
+    view.observed.validate(view.camera);
+    if (!view.observed.has_rgb() && !view.observed.has_depth())
+      throw std::invalid_argument("refine: need at least an rgb or a depth image" + which);
+    if (view.observed.has_mask() != has_mask_)
+      throw std::invalid_argument("refine: either every view has a mask or none" + which);
+    meshes_.push_back(view.mesh);
+    for (const Pose& initial : initials) {
+      if (!initial.is_valid(1e-4))
+        throw std::invalid_argument("refine: initial pose is not finite or its rotation is not orthonormal");
+      const Eigen::Vector3d centre0 = initial * view.mesh->center();
+      if (!(centre0.z() > o.render.near_plane))
+        throw std::invalid_argument("refine: initial pose puts the object behind the camera (z = " +
+                                    std::to_string(centre0.z()) + " m)" + which);
+      check_in_view(scaled_camera(view.camera, o.image_scale), *view.mesh, initial, o.render.near_plane);
+    }
   }
   const Pose& initial = initials.front();
   const int starts = int(initials.size());
@@ -196,9 +239,11 @@ RefineRun::RefineRun(const RefinerOptions& o, const Camera& camera, const Observ
   loss_ = o.loss;
   // The images at each scale: the frame's shared ones (refine_all) or resized here, this object's mask resized,
   // and without a mask a window around the initial projections (the mask term then has no observation).
-  const auto make_level = [&](double scale, const Observation* shared) {
+  const auto make_level = [&](const RefineView& view, double scale, const Observation* shared) {
+    const Observation& observed = view.observed;
+    const Mesh& mesh = *view.mesh;
     Level l;
-    l.cam = scaled_camera(camera, scale);
+    l.cam = scaled_camera(view.camera, scale);
     if (shared) {
       Observation own;
       own.mask = observed.mask;
@@ -220,15 +265,19 @@ RefineRun::RefineRun(const RefinerOptions& o, const Camera& camera, const Observ
     }
     return l;
   };
-  has_mask_ = observed.has_mask();
-  fine_ = make_level(o.image_scale, scaled_frame);
-  if (has_mask_ && cv::countNonZero(fine_.obs.mask > 0) == 0)
-    throw std::invalid_argument("refine: the object mask is empty");
+  switch_at_ = coarse_iterations(o);
+  for (const RefineView& view : views) {
+    fine_.push_back(make_level(view, o.image_scale, scaled_frame));
+    if (has_mask_ && cv::countNonZero(fine_.back().obs.mask > 0) == 0)
+      throw std::invalid_argument(views.size() > 1 ? "refine: the object mask of view " +
+                                                         std::to_string(fine_.size() - 1) + " is empty"
+                                                   : "refine: the object mask is empty");
+    if (switch_at_ > 0) coarse_.push_back(make_level(view, o.image_scale * o.coarse_scale, coarse_frame));
+  }
   if (!has_mask_) loss_.weight_mask = 0;  // the window is not an observation of the silhouette
+  pivot_model_ = pivot_model ? *pivot_model : meshes_.front()->center();
   scan_loss_ = loss_;
   scan_loss_.weight_texture += o.explore_texture_weight;
-  switch_at_ = coarse_iterations(o);
-  if (switch_at_ > 0) coarse_ = make_level(o.image_scale * o.coarse_scale, coarse_frame);
   if (!turns_.empty()) scan_at_ = scan_iteration(o);
 
   const int B = o.batch_size;
@@ -251,7 +300,8 @@ RefineRun::RefineRun(const RefinerOptions& o, const Camera& camera, const Observ
   best_.assign(B, LossValue());
   for (auto& b : best_) b.total = std::numeric_limits<double>::infinity();
   res_.run_histories.assign(B, {});
-  diameter_ = std::max(mesh.diameter(), 1e-6);
+  diameter_ = 1e-6;
+  for (const Mesh* m : meshes_) diameter_ = std::max(diameter_, m->diameter());
   active_.resize(B);
   for (int i = 0; i < B; ++i) active_[i] = i;
   best_overall_ = std::numeric_limits<double>::infinity();
@@ -341,7 +391,7 @@ void RefineRun::absorb(const std::vector<LossValue>& values, const std::function
   for (size_t j = 0; j < active_.size(); ++j) {
     const int i = active_[j];
     if (!std::isfinite(values[j].total)) continue;  // a run that left the image keeps its pose
-    const Eigen::Vector3d pivot = poses_[i] * mesh_.center();
+    const Eigen::Vector3d pivot = poses_[i] * pivot_model_;
     poses_[i] = refiner_step(poses_[i], values[j].gradient, res_.learning_rates[i] * decay, diameter_, pivot);
   }
   ++k_;
@@ -362,12 +412,10 @@ RefineResult RefineRun::finish(Renderer& renderer) {
   res.loss = best_[res.winner];
   res.history = res.run_histories[res.winner];
 
-  const Camera& cam = fine_.cam;
-  const Observation& obs = fine_.obs;
   if (switch_at_ > 0) {  // the first iteration was at the coarse scale: the initial loss at the fine one
     std::vector<LossValue> v;  // of the starts that got a run, as at k = 0
     const std::vector<Pose> started(initials_.begin(), initials_.begin() + std::min(starts, B));
-    renderer.evaluate(cam, mesh_, obs, started, loss_, false, v);
+    evaluate(renderer, started, loss_, false, v, true);
     const size_t j = size_t(std::min_element(v.begin(), v.end(), [](auto& a, auto& b) { return a.total < b.total; }) - v.begin());
     res.initial_loss = v[j].total;
     // The start is a pose seen too (at k = 0, at the coarse scale): when no run's fine-phase best beats it (a
@@ -381,38 +429,56 @@ RefineResult RefineRun::finish(Renderer& renderer) {
       res.history = res.run_histories[j];
     }
   }
+  const bool one_view = meshes_.size() == 1;
+  const Mesh& mesh0 = *meshes_.front();
   // Of the poses a declared symmetry makes equivalent, the one nearest the start: a track does not spin.
-  res.pose = mesh_.symmetry.nearest_equivalent(res.pose, res.initial_pose.R);
-  // Quality scores at the refined pose.
-  const RenderImage img = renderer.render(cam, mesh_, {res.pose}, obs.mask)[0];
-  const cv::Mat rendered = img.coverage >= 0.5f;
-  if (has_mask_) {
-    const cv::Mat observed_mask = obs.mask >= 0.5f;
-    const double inter = cv::countNonZero(rendered & observed_mask), uni = cv::countNonZero(rendered | observed_mask);
-    res.mask_iou = uni > 0 ? inter / uni : 0.0;
+  if (one_view) res.pose = mesh0.symmetry.nearest_equivalent(res.pose, res.initial_pose.R);
+  // Quality scores at the refined pose, per view; the result's are the weakest view's.
+  int rendered_pixels = 0;
+  for (size_t v = 0; v < meshes_.size(); ++v) {
+    const Camera& cam = fine_[v].cam;
+    const Observation& obs = fine_[v].obs;
+    RefineResult::ViewScores scores;
+    const RenderImage img = renderer.render(cam, *meshes_[v], {res.pose}, obs.mask)[0];
+    const cv::Mat rendered = img.coverage >= 0.5f;
+    rendered_pixels += cv::countNonZero(rendered);
+    if (has_mask_) {
+      const cv::Mat observed_mask = obs.mask >= 0.5f;
+      const double inter = cv::countNonZero(rendered & observed_mask), uni = cv::countNonZero(rendered | observed_mask);
+      scores.mask_iou = uni > 0 ? inter / uni : 0.0;
+    }
+    if (obs.has_depth()) {
+      // Over the observed object, or (without a mask) over what the render covers: the window is not the object.
+      const cv::Mat object = (has_mask_ ? cv::Mat(obs.mask >= 0.5f) : rendered) & (obs.depth > 0);
+      const int n = cv::countNonZero(object);
+      cv::Mat diff;
+      cv::absdiff(obs.depth, img.depth, diff);
+      const cv::Mat inlier = object & (img.depth > 0) & (diff < o.inlier_threshold);
+      scores.depth_inliers = n > 0 ? double(cv::countNonZero(inlier)) / n : 0.0;
+    }
+    if (one_view && obs.has_rgb()) {
+      // The object's interior where the observation shows it: 2 px inside the render's full coverage (the
+      // silhouette's gradients fit whenever the shape does) and, with a mask, inside the observed mask.
+      cv::Mat interior = img.coverage >= 0.999f;
+      if (has_mask_) interior &= cv::Mat(obs.mask >= 0.5f);
+      cv::erode(interior, interior, cv::getStructuringElement(cv::MORPH_RECT, cv::Size(5, 5)));
+      res.print = register_print(obs.rgb, img.color, interior, 8, loss_.texture_epsilon);
+    }
+    if (!one_view) {
+      std::vector<LossValue> value;
+      renderer.evaluate(cam, *meshes_[v], obs, {res.pose}, loss_, false, value);
+      scores.loss = value[0].total;
+    }
+    const auto weakest = [](double a, double b) { return a < 0 ? b : b < 0 ? a : std::min(a, b); };
+    res.mask_iou = v == 0 ? scores.mask_iou : weakest(res.mask_iou, scores.mask_iou);
+    res.depth_inliers = v == 0 ? scores.depth_inliers : weakest(res.depth_inliers, scores.depth_inliers);
+    if (!one_view) res.view_scores.push_back(scores);
   }
-  if (obs.has_depth()) {
-    // Over the observed object, or (without a mask) over what the render covers: the window is not the object.
-    const cv::Mat object = (has_mask_ ? cv::Mat(obs.mask >= 0.5f) : rendered) & (obs.depth > 0);
-    const int n = cv::countNonZero(object);
-    cv::Mat diff;
-    cv::absdiff(obs.depth, img.depth, diff);
-    const cv::Mat inlier = object & (img.depth > 0) & (diff < o.inlier_threshold);
-    res.depth_inliers = n > 0 ? double(cv::countNonZero(inlier)) / n : 0.0;
-  }
-  if (obs.has_rgb()) {
-    // The object's interior where the observation shows it: 2 px inside the render's full coverage (the
-    // silhouette's gradients fit whenever the shape does) and, with a mask, inside the observed mask.
-    cv::Mat interior = img.coverage >= 0.999f;
-    if (has_mask_) interior &= cv::Mat(obs.mask >= 0.5f);
-    cv::erode(interior, interior, cv::getStructuringElement(cv::MORPH_RECT, cv::Size(5, 5)));
-    res.print = register_print(obs.rgb, img.color, interior, 8, loss_.texture_epsilon);
-  }
-  if (o.probe_distance > 0 && std::isfinite(res.loss.total))
-    res.curvature = probe_pose_curvature(renderer, cam, mesh_, obs, loss_, res.pose, o.probe_distance,
-                                         mesh_.symmetry.free_twists(res.pose, res.pose * mesh_.center()));
-  res.pivot = res.pose * mesh_.center();
-  res.covariance = pose_covariance(res.curvature, cv::countNonZero(rendered), mesh_.diameter());
+  if (one_view && o.probe_distance > 0 && std::isfinite(res.loss.total))
+    res.curvature = probe_pose_curvature(renderer, fine_[0].cam, mesh0, fine_[0].obs, loss_, res.pose,
+                                         o.probe_distance, mesh0.symmetry.free_twists(res.pose, res.pose * mesh0.center()));
+  res.pivot = res.pose * pivot_model_;
+  res.covariance = pose_covariance(res.curvature, rendered_pixels, diameter_);
   const size_t n = res.history.size(), tail = std::max<size_t>(2, n / 10);
   if (n >= tail) {
     const double a = res.history[n - tail], b = res.history.back();
@@ -422,7 +488,7 @@ RefineResult RefineRun::finish(Renderer& renderer) {
   evidence.mask_iou = res.mask_iou;
   evidence.depth_inliers = res.depth_inliers;
   // A continuous declared symmetry turns the print with the object: it cannot be registered along that axis.
-  if (mesh_.symmetry.continuous.empty()) evidence.print_significance = res.print.significance();
+  if (one_view && mesh0.symmetry.continuous.empty()) evidence.print_significance = res.print.significance();
   const Verdict verdict = judge(evidence, o.min_mask_iou, o.min_depth_inliers, o.min_print_significance);
   res.plausible = std::isfinite(res.loss.total) && verdict.plausible;
   res.confidence = std::isfinite(res.loss.total) ? verdict.confidence : 0.0;

@@ -1,0 +1,104 @@
+// The generated test arm (procedural_robot.hpp).
+#include "diffdope/procedural_robot.hpp"
+
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <stdexcept>
+
+#include "diffdope/mesh.hpp"
+#include "diffdope/procedural.hpp"
+
+namespace diffdope {
+namespace {
+
+Texture flat_texture(float grey) {
+  Texture t;
+  t.width = t.height = 1;
+  t.rgb = {grey, grey, 0.95f * grey};
+  t.source = "flat";
+  return t;
+}
+
+}  // namespace
+
+GeneratedRobot write_generated_robot(const std::string& dir) {
+  namespace fs = std::filesystem;
+  std::error_code ec;
+  fs::create_directories(fs::path(dir) / "meshes", ec);
+  if (ec) throw std::runtime_error(dir + ": cannot create: " + ec.message());
+  // Link meshes, each in its link's frame (the joint at its origin, the link along +z).
+  struct Part {
+    std::string name;
+    Mesh mesh;
+    double z_centre;  // visual origin: the mesh centre on the link's z axis
+  };
+  std::vector<Part> parts;
+  parts.push_back({"base", make_box(Eigen::Vector3d(0.22, 0.18, 0.10), flat_texture(0.35f)), 0.05});
+  parts.push_back({"link1", make_cylinder(0.055, 0.12, 48, flat_texture(0.6f)), 0.06});
+  parts.push_back({"link2", make_box(Eigen::Vector3d(0.07, 0.06, 0.30), flat_texture(0.7f)), 0.15});
+  parts.push_back({"link3", make_box(Eigen::Vector3d(0.05, 0.05, 0.25), flat_texture(0.65f)), 0.125});
+  parts.push_back({"link4", make_cylinder(0.035, 0.08, 32, flat_texture(0.5f)), 0.04});
+  parts.push_back({"link5", make_box(Eigen::Vector3d(0.11, 0.04, 0.06), flat_texture(0.75f)), 0.03});
+  for (const Part& p : parts) save_ply(p.mesh, (fs::path(dir) / "meshes" / (p.name + ".ply")).string(), 1.0);
+
+  // Joint offsets along the parent's z (the parent link's length), axes alternating about z and y.
+  const double offset[5] = {0.10, 0.12, 0.30, 0.25, 0.08};
+  const char* axis[5] = {"0 0 1", "0 1 0", "0 1 0", "0 0 1", "0 1 0"};
+  GeneratedRobot robot;
+  std::ostringstream u;
+  u << "<?xml version=\"1.0\"?>\n<robot name=\"diffdope_test_arm\">\n"
+    << "  <material name=\"orange\"><color rgba=\"0.9 0.5 0.1 1\"/></material>\n";
+  for (size_t i = 0; i < parts.size(); ++i) {
+    const std::string link = i == 0 ? "base_link" : parts[i].name;
+    u << "  <link name=\"" << link << "\">\n    <visual>\n      <origin xyz=\"0 0 " << parts[i].z_centre
+      << "\" rpy=\"0 0 0\"/>\n      <geometry><mesh filename=\"meshes/" << parts[i].name
+      << ".ply\"/></geometry>\n    </visual>\n  </link>\n";
+    if (i == 0) continue;
+    const std::string joint = "joint" + std::to_string(i), parent = i == 1 ? "base_link" : parts[i - 1].name;
+    const double lower = i == 1 ? -2.5 : -1.6, upper = i == 1 ? 2.5 : 1.6;
+    u << "  <joint name=\"" << joint << "\" type=\"revolute\">\n    <parent link=\"" << parent
+      << "\"/>\n    <child link=\"" << link << "\"/>\n    <origin xyz=\"0 0 " << offset[i - 1]
+      << "\" rpy=\"0 0 0\"/>\n    <axis xyz=\"" << axis[i - 1] << "\"/>\n    <limit lower=\"" << lower
+      << "\" upper=\"" << upper << "\" effort=\"10\" velocity=\"1\"/>\n  </joint>\n";
+    robot.joints.push_back(joint);
+    robot.limits[joint] = {lower, upper};
+  }
+  // A tool on a fixed joint, drawn as a URDF primitive (no mesh file), off the hand's axis.
+  u << "  <link name=\"tool\">\n    <visual>\n      <origin xyz=\"0.03 0 0.02\" rpy=\"0 0 0\"/>\n"
+    << "      <geometry><box size=\"0.03 0.08 0.04\"/></geometry>\n      <material name=\"orange\"/>\n"
+    << "    </visual>\n  </link>\n"
+    << "  <joint name=\"tool_joint\" type=\"fixed\">\n    <parent link=\"link5\"/>\n    <child link=\"tool\"/>\n"
+    << "    <origin xyz=\"0 0 0.06\" rpy=\"0 0 0\"/>\n  </joint>\n</robot>\n";
+  robot.urdf_path = (fs::path(dir) / "robot.urdf").string();
+  std::ofstream f(robot.urdf_path);
+  f << u.str();
+  if (!f) throw std::runtime_error(robot.urdf_path + ": cannot write");
+  return robot;
+}
+
+std::map<std::string, double> random_configuration(const GeneratedRobot& robot, std::mt19937_64& rng) {
+  std::map<std::string, double> q;
+  std::uniform_real_distribution<double> U(-1.0, 1.0);
+  for (const std::string& j : robot.joints) {
+    const auto [lo, hi] = robot.limits.at(j);
+    q[j] = 0.5 * (lo + hi) + 0.6 * 0.5 * (hi - lo) * U(rng);
+  }
+  // Shoulder and elbow bent forward by at most ~70 degrees: the arm stays up, its links apart.
+  q.at("joint2") = 0.6 * U(rng);
+  q.at("joint3") = 0.4 + 0.6 * U(rng);
+  return q;
+}
+
+Pose look_at(const Eigen::Vector3d& eye, const Eigen::Vector3d& target) {
+  const Eigen::Vector3d z = (target - eye).normalized();
+  Eigen::Vector3d x = z.cross(Eigen::Vector3d::UnitZ());  // right: down is the base's -z
+  if (x.norm() < 1e-6) x = Eigen::Vector3d::UnitX();
+  x.normalize();
+  const Eigen::Vector3d y = z.cross(x);
+  Eigen::Matrix3d base_from_camera;
+  base_from_camera << x, y, z;
+  return Pose(base_from_camera, eye).inverse();
+}
+
+}  // namespace diffdope
