@@ -4,6 +4,7 @@
 // camera <- base shared by every capture, and the refiner's descent (several views, one pose) fits it to the
 // captures' depth (and mask, and rgb when the meshes carry the robot's colours). Eye-to-hand: a static camera
 // watching the robot. Units: metres, radians; OpenCV optical frame (x right, y down, z forward).
+#include <functional>
 #include <map>
 #include <memory>
 #include <string>
@@ -76,6 +77,9 @@ class Calibrator {
   /// image at the initial guess.
   CalibrationResult calibrate(const RobotModel& robot, const std::vector<CalibrationCapture>& captures,
                               const Pose& initial);
+
+  /// Optional progress callback: each iteration of each pass (pass from 0) with the best loss so far.
+  std::function<void(int pass, int iteration, int total, double best_loss)> on_iteration;
 
   /// The robot's pixels in a capture without a mask (CV_32F 0/1): see CalibrationOptions::mask_margin.
   /// `posed_robot`: the robot merged in its base frame at the capture's joint positions.

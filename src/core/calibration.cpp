@@ -104,6 +104,9 @@ CalibrationResult Calibrator::calibrate(const RobotModel& robot, const std::vect
   out.initial_camera_from_base = initial;
   Pose from = initial;
   for (int pass = 0; pass < options_.passes; ++pass) {
+    refiner_.on_iteration = nullptr;
+    if (on_iteration)
+      refiner_.on_iteration = [this, pass](int k, int total, double loss) { on_iteration(pass, k, total, loss); };
     try {
       out.refine = refiner_.refine_views(views, {from}, centre);
     } catch (const std::invalid_argument& e) {
@@ -112,6 +115,7 @@ CalibrationResult Calibrator::calibrate(const RobotModel& robot, const std::vect
     from = out.refine.pose;
     ++out.passes;
   }
+  refiner_.on_iteration = nullptr;
   out.camera_from_base = out.refine.pose;
   out.plausible = out.refine.plausible;
   out.confidence = out.refine.confidence;

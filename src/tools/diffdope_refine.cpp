@@ -5,7 +5,6 @@
 // DIR/losses.png (loss per iteration of every run, the winner highlighted); prints the pose and the timing.
 // Every unusable input is reported as one line `diffdope_refine: <file>: <problem>` with exit code 1; command-line
 // mistakes print the usage with exit code 2.
-#include <fcntl.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -26,10 +25,12 @@
 
 #include "diffdope/input_files.hpp"
 #include "diffdope/refiner.hpp"
+#include "tool_io.hpp"
 
 using namespace diffdope;
 namespace fs = std::filesystem;
 using json = nlohmann::json;
+using namespace diffdope::tools;
 
 namespace {
 
@@ -52,85 +53,6 @@ const char* kUsage =
     "  --config FILE     refiner options YAML (see config/default.yaml)\n"
     "  --device D        backend: cpu, cuda (error without a GPU) or auto (CUDA if present); overrides --config\n"
     "  --quiet           no progress bar and no summary on stdout\n";
-
-/// An input that cannot be used: `file` is the file (or folder) to name in the message.
-using InputError = InputFileError;
-
-[[noreturn]] void fail(const std::string& file, const std::string& what) { throw InputError(file, what); }
-
-/// Library messages often start with the file name already; drop that so the file is named once.
-std::string strip_file_prefix(std::string msg, const std::string& file) {
-  for (const std::string& p : {file + ": ", "Mesh::load('" + file + "'): "})
-    if (msg.rfind(p, 0) == 0) msg = msg.substr(p.size());
-  return msg;
-}
-
-std::string one_line(std::string s) {
-  for (char& c : s)
-    if (c == '\n' || c == '\r') c = ' ';
-  while (!s.empty() && s.back() == ' ') s.pop_back();
-  return s;
-}
-
-/// Runs `f`, turning any exception into an InputError naming `file`.
-template <typename F>
-auto about(const std::string& file, F&& f) -> decltype(f()) {
-  try {
-    return f();
-  } catch (const InputError&) {
-    throw;
-  } catch (const std::exception& e) {
-    fail(file, strip_file_prefix(e.what(), file));
-  }
-}
-
-/// Silences stderr while alive: image decoders (libpng, libjpeg) and assimp print their own complaints about
-/// corrupt files there, which would break our one-line error reports. The error itself is reported by us.
-class QuietStderr {
- public:
-  QuietStderr() {
-    std::fflush(stderr);
-    saved_ = dup(2);
-    const int null = open("/dev/null", O_WRONLY);
-    if (saved_ >= 0 && null >= 0) dup2(null, 2);
-    if (null >= 0) close(null);
-  }
-  ~QuietStderr() {
-    std::fflush(stderr);
-    if (saved_ >= 0) {
-      dup2(saved_, 2);
-      close(saved_);
-    }
-  }
-  QuietStderr(const QuietStderr&) = delete;
-  QuietStderr& operator=(const QuietStderr&) = delete;
-
- private:
-  int saved_ = -1;
-};
-
-void check_file(const std::string& path) { check_input_file(path); }
-
-cv::Mat read_image(const std::string& path, int flags, const std::string& kind) {
-  check_file(path);
-  cv::Mat img;
-  try {
-    QuietStderr quiet;
-    img = cv::imread(path, flags);
-  } catch (const std::exception& e) {
-    fail(path, "cannot decode the " + kind + " image (" + one_line(e.what()) + ")");
-  }
-  if (img.empty()) fail(path, "cannot read it as an image (corrupt file or unsupported format)");
-  return img;
-}
-
-std::string fmt(double v, const char* f = "%.6f") {
-  char b[64];
-  std::snprintf(b, sizeof b, f, v);
-  return b;
-}
-
-std::string size_str(int w, int h) { return std::to_string(w) + "x" + std::to_string(h); }
 
 /// The initial pose must put the object in front of the camera and (at least partly) in the image.
 void check_init_in_view(const std::string& path, const Pose& pose, const Mesh& mesh, const std::string& mesh_path,
@@ -155,50 +77,6 @@ void check_init_in_view(const std::string& path, const Pose& pose, const Mesh& m
   if (x1 < -0.5 || y1 < -0.5 || x0 > cam.width - 0.5 || y0 > cam.height - 0.5)
     fail(path, "the initial pose puts the object outside the image (centre projects to (" +
                    std::to_string(cam.project(c).x()) + ", " + std::to_string(cam.project(c).y()) + "))" + hint);
-}
-
-// ---- Outputs ----
-
-void write_image(const std::string& path, const cv::Mat& img) {
-  bool ok = false;
-  try {
-    ok = cv::imwrite(path, img);
-  } catch (const std::exception& e) {
-    fail(path, std::string("cannot write: ") + one_line(e.what()));
-  }
-  if (!ok) fail(path, "cannot write the image");
-}
-
-cv::Mat to_bgr8(const cv::Mat& rgb_float) {
-  cv::Mat bgr;
-  cv::cvtColor(rgb_float, bgr, cv::COLOR_RGB2BGR);
-  bgr.convertTo(bgr, CV_8UC3, 255.0);
-  return bgr;
-}
-
-/// Translucent render (colour where coverage > 0.5, alpha 0.35) and its outline in `colour`.
-void draw_render(cv::Mat& bgr8, const RenderImage& img, const cv::Scalar& colour, int thickness) {
-  const double alpha = 0.35;
-  for (int y = 0; y < bgr8.rows; ++y) {
-    const float* cov = img.coverage.ptr<float>(y);
-    const cv::Vec3f* col = img.color.ptr<cv::Vec3f>(y);
-    cv::Vec3b* out = bgr8.ptr<cv::Vec3b>(y);
-    for (int x = 0; x < bgr8.cols; ++x) {
-      if (!(cov[x] > 0.5f)) continue;
-      for (int c = 0; c < 3; ++c) {
-        const double r = std::clamp(double(col[x][2 - c]) / cov[x], 0.0, 1.0) * 255.0;  // unpremultiply, RGB->BGR
-        out[x][c] = cv::saturate_cast<uchar>((1 - alpha) * out[x][c] + alpha * r);
-      }
-    }
-  }
-  std::vector<std::vector<cv::Point>> contours;
-  cv::findContours(cv::Mat(img.coverage >= 0.5f), contours, cv::RETR_EXTERNAL, cv::CHAIN_APPROX_NONE);
-  cv::drawContours(bgr8, contours, -1, colour, thickness, cv::LINE_AA);
-}
-
-void put_label(cv::Mat& img, const std::string& text, cv::Point at, const cv::Scalar& colour, double scale) {
-  cv::putText(img, text, at, cv::FONT_HERSHEY_SIMPLEX, scale, cv::Scalar(0, 0, 0), 3, cv::LINE_AA);
-  cv::putText(img, text, at, cv::FONT_HERSHEY_SIMPLEX, scale, colour, 1, cv::LINE_AA);
 }
 
 cv::Mat make_overlay(const Observation& obs, Renderer& renderer, const Camera& cam, const Mesh& mesh,

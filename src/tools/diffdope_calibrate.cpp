@@ -1,0 +1,452 @@
+// diffdope_calibrate: calibrates a static camera to a robot from the robot's own meshes (URDF) and a few captures
+// of it at known joint positions (include/diffdope/calibration.hpp), everything read from files.
+//   diffdope_calibrate --urdf FILE --captures DIR --camera FILE --init FILE --out DIR [options]
+//   diffdope_calibrate --generate DIR [--count N] [--seed S] [--init-error CM DEG] [--no-mask] [--no-rgb]
+// Writes DIR/calibration.yaml (easy_handeye's layout), DIR/calibration.launch (a static_transform_publisher),
+// DIR/result.json, DIR/residuals.txt and DIR/overlay_<capture>.png. Every unusable input is one line
+// `diffdope_calibrate: <file>: <problem>` with exit code 1; command-line mistakes print the usage, exit code 2.
+#include <unistd.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <iostream>
+#include <map>
+#include <nlohmann/json.hpp>
+#include <opencv2/core/utils/logger.hpp>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+#include <random>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "diffdope/calibration.hpp"
+#include "diffdope/input_files.hpp"
+#include "diffdope/procedural.hpp"
+#include "diffdope/procedural_robot.hpp"
+#include "diffdope/synthetic.hpp"
+#include "tool_io.hpp"
+
+using namespace diffdope;
+using namespace diffdope::tools;
+namespace fs = std::filesystem;
+using json = nlohmann::ordered_json;
+
+namespace {
+
+const char* kUsage =
+    "usage: diffdope_calibrate --urdf FILE --captures DIR --camera FILE --init FILE --out DIR\n"
+    "                          [--package-path NAME=DIR]... [--depth-scale M] [--config FILE] [--passes N]\n"
+    "                          [--mask-margin M] [--robot-base-frame NAME] [--camera-frame NAME] [--truth FILE]\n"
+    "                          [--quiet]\n"
+    "       diffdope_calibrate --generate DIR [--count N] [--seed S] [--init-error CM DEG] [--no-mask] [--no-rgb]\n"
+    "\n"
+    "  --urdf FILE            the robot (meshes: STL, DAE, OBJ, PLY...; package:// paths, see --package-path)\n"
+    "  --captures DIR         one folder per capture (in name order), each with depth.png (16-bit, millimetres;\n"
+    "                         or a float image in metres with --depth-scale 1), joints.json ({\"joint\": radians}\n"
+    "                         or a JointState-like {\"name\": [...], \"position\": [...]}), optional rgb.png and\n"
+    "                         mask.png (nonzero = robot; all captures or none)\n"
+    "  --camera FILE          intrinsics (.json / .yaml, as diffdope_refine), the depth images' size\n"
+    "  --init FILE            initial guess of the camera's pose in the robot base frame (base -> camera optical\n"
+    "                         frame, metres), JSON: {\"R\": [9], \"t\": [3]}, {\"quaternion\": [x,y,z,w], \"t\": [3]}\n"
+    "                         or {\"matrix\": [16]}; 5 cm / 10 deg off is fine, see the README for more\n"
+    "  --out DIR              output folder (created)\n"
+    "  --package-path N=DIR   resolve package://N/... to DIR/... (repeatable; else ROS_PACKAGE_PATH is searched)\n"
+    "  --depth-scale M        metres per depth unit (default 0.001)\n"
+    "  --config FILE          refiner options YAML over the calibration's defaults (see config/default.yaml)\n"
+    "  --passes N             descents in a row (default 2)\n"
+    "  --mask-margin M        without masks: metres around the robot at the guess that count as robot (0.08)\n"
+    "  --robot-base-frame F   frame name for the outputs (default: the URDF's root link)\n"
+    "  --camera-frame F       frame name for the outputs (default camera_color_optical_frame)\n"
+    "  --truth FILE           the true camera pose (same format as --init): prints and stores the errors\n"
+    "  --quiet                no progress on the terminal\n"
+    "  --generate DIR         writes a generated arm, N captures of it (default 3), camera.json, init.json (the\n"
+    "                         truth moved by --init-error, default 5 cm 10 deg) and truth.json, then exits\n";
+
+int usage_error(const std::string& what) {
+  std::cerr << "diffdope_calibrate: " << what << "\n" << kUsage;
+  return 2;
+}
+
+double parse_number(const std::string& flag, const std::string& v) {
+  size_t used = 0;
+  double x = 0;
+  try {
+    x = std::stod(v, &used);
+  } catch (const std::exception&) {
+    used = 0;
+  }
+  if (used == 0 || used != v.size() || !std::isfinite(x)) throw std::invalid_argument(flag + ": expected a number, got '" + v + "'");
+  return x;
+}
+
+json pose_json(const Pose& p) {
+  const auto q = p.quaternion_xyzw();
+  return json{{"t", {p.t.x(), p.t.y(), p.t.z()}}, {"quaternion", {q[0], q[1], q[2], q[3]}}};
+}
+
+void write_text(const std::string& path, const std::string& text) {
+  std::ofstream f(path);
+  f << text;
+  if (!f) fail(path, "cannot write");
+}
+
+// ---- Generating a capture set ----
+
+int generate(const std::string& dir, int count, uint64_t seed, double init_cm, double init_deg, bool masks, bool rgb) {
+  fs::create_directories(fs::path(dir) / "captures");
+  const GeneratedRobot robot = write_generated_robot((fs::path(dir) / "robot").string());
+  const RobotModel model = RobotModel::load_urdf(robot.urdf_path);
+  const Camera cam(600, 600, 319.5, 239.5, 640, 480);
+  const Pose truth = look_at(Eigen::Vector3d(1.2, -0.5, 0.7), Eigen::Vector3d(0, 0, 0.35));  // camera <- base
+  std::mt19937_64 rng(seed);
+  const auto renderer = make_cpu_renderer();
+  const Mesh occluder = make_box(Eigen::Vector3d(0.06, 0.06, 0.06), make_label_texture(64, 5));
+  for (int k = 0; k < count; ++k) {
+    const auto q = random_configuration(robot, rng);
+    const Mesh posed = merge_meshes(model.posed_visuals(q), "arm");
+    std::vector<SceneObject> objects{{&posed, truth}};
+    if (k % 3 == 1)  // every third capture has a box floating in front of the upper arm
+      objects.push_back({&occluder, Pose(Eigen::Matrix3d::Identity(),
+                                         0.8 * (truth * Eigen::Vector3d(0, 0, 0.35)) + Eigen::Vector3d(0.04, 0, 0))});
+    SyntheticNoise noise;
+    noise.background_depth = 2.5;
+    const SyntheticScene s = synthesize_scene(*renderer, cam, objects, noise, uint32_t(seed * 1000 + k));
+    char name[16];
+    std::snprintf(name, sizeof name, "%02d", k);
+    const fs::path cdir = fs::path(dir) / "captures" / name;
+    fs::create_directories(cdir);
+    cv::Mat depth_mm;
+    s.depth.convertTo(depth_mm, CV_16U, 1000.0);
+    write_image((cdir / "depth.png").string(), depth_mm);
+    if (rgb) write_image((cdir / "rgb.png").string(), to_bgr8(s.rgb));
+    if (masks) {
+      cv::Mat m = s.visible_masks[0] >= 0.5f;
+      write_image((cdir / "mask.png").string(), m);
+    }
+    json joints;
+    for (const auto& [n, v] : q) joints[n] = v;
+    write_text((cdir / "joints.json").string(), joints.dump(2) + "\n");
+  }
+  write_text((fs::path(dir) / "camera.json").string(),
+             json{{"fx", cam.fx}, {"fy", cam.fy}, {"cx", cam.cx}, {"cy", cam.cy}, {"width", cam.width},
+                  {"height", cam.height}}.dump(2) + "\n");
+  const Pose guess = perturb_pose(truth, Eigen::Vector3d(0, 0, 0.35), init_deg * M_PI / 180, 0.01 * init_cm, rng);
+  write_text((fs::path(dir) / "init.json").string(), pose_json(guess.inverse()).dump(2) + "\n");
+  write_text((fs::path(dir) / "truth.json").string(), pose_json(truth.inverse()).dump(2) + "\n");
+  std::printf("wrote %s: robot/robot.urdf, %d captures, camera.json, init.json (%.1f cm, %.1f deg off), truth.json\n",
+              dir.c_str(), count, init_cm, init_deg);
+  return 0;
+}
+
+// ---- Reading captures ----
+
+std::map<std::string, double> read_joints(const std::string& path) {
+  check_file(path);
+  std::ifstream in(path);
+  nlohmann::json j;
+  try {
+    in >> j;
+  } catch (const std::exception& e) {
+    fail(path, "not valid JSON (" + one_line(e.what()) + ")");
+  }
+  std::map<std::string, double> q;
+  const auto number = [&](const std::string& name, const nlohmann::json& v) {
+    if (!v.is_number()) fail(path, "joint '" + name + "': expected a number");
+    const double x = v.get<double>();
+    if (!std::isfinite(x)) fail(path, "joint '" + name + "': not finite");
+    q[name] = x;
+  };
+  if (j.is_object() && j.contains("name") && j.contains("position")) {  // JointState-like
+    if (!j["name"].is_array() || !j["position"].is_array() || j["name"].size() != j["position"].size())
+      fail(path, "'name' and 'position' must be arrays of the same length");
+    for (size_t i = 0; i < j["name"].size(); ++i) {
+      if (!j["name"][i].is_string()) fail(path, "'name' must hold strings");
+      number(j["name"][i].get<std::string>(), j["position"][i]);
+    }
+  } else if (j.is_object()) {
+    for (const auto& [name, v] : j.items()) number(name, v);
+  } else {
+    fail(path, "expected {\"joint\": position, ...} or {\"name\": [...], \"position\": [...]}");
+  }
+  if (q.empty()) fail(path, "no joint positions");
+  return q;
+}
+
+struct Args {
+  std::string urdf, captures, camera, init, out, config, truth, base_frame, camera_frame = "camera_color_optical_frame";
+  std::map<std::string, std::string> packages;
+  double depth_scale = 0.001, mask_margin = -1;
+  int passes = 0;
+  bool quiet = false;
+};
+
+std::vector<CalibrationCapture> read_captures(const Args& a) {
+  if (!fs::is_directory(a.captures)) fail(a.captures, "not a folder");
+  std::vector<fs::path> dirs;
+  for (const auto& e : fs::directory_iterator(a.captures))
+    if (e.is_directory()) dirs.push_back(e.path());
+  std::sort(dirs.begin(), dirs.end());
+  if (dirs.empty()) fail(a.captures, "no capture folder in it (one folder per capture: depth.png, joints.json)");
+  std::vector<CalibrationCapture> out;
+  Camera cam;
+  for (const fs::path& d : dirs) {
+    CalibrationCapture c;
+    c.name = d.filename().string();
+    const std::string depth_path = (d / "depth.png").string();
+    const cv::Mat depth = read_image(depth_path, cv::IMREAD_ANYDEPTH | cv::IMREAD_ANYCOLOR, "depth");
+    if (depth.channels() != 1) fail(depth_path, "depth must have one channel, found " + std::to_string(depth.channels()));
+    if (out.empty()) cam = read_camera_file(a.camera, depth.cols, depth.rows);
+    if (depth.cols != cam.width || depth.rows != cam.height)
+      fail(depth_path, "depth image is " + size_str(depth.cols, depth.rows) + " but the camera is " +
+                           size_str(cam.width, cam.height));
+    c.camera = cam;
+    c.observed.depth = about(depth_path, [&] { return to_depth_metres(depth, a.depth_scale, depth_path); });
+    if (cv::countNonZero(c.observed.depth > 0) == 0) fail(depth_path, "the depth image has no valid reading");
+    const std::string rgb_path = (d / "rgb.png").string(), mask_path = (d / "mask.png").string();
+    if (fs::exists(rgb_path)) {
+      const cv::Mat rgb = read_image(rgb_path, cv::IMREAD_ANYDEPTH | cv::IMREAD_ANYCOLOR, "rgb");
+      if (rgb.cols != cam.width || rgb.rows != cam.height)
+        fail(rgb_path, "rgb image is " + size_str(rgb.cols, rgb.rows) + " but depth is " + size_str(cam.width, cam.height));
+      c.observed.rgb = about(rgb_path, [&] { return to_rgb_float(rgb, true, rgb_path); });
+    }
+    if (fs::exists(mask_path)) {
+      const cv::Mat m = read_image(mask_path, cv::IMREAD_ANYDEPTH | cv::IMREAD_ANYCOLOR, "mask");
+      if (m.cols != cam.width || m.rows != cam.height)
+        fail(mask_path, "mask is " + size_str(m.cols, m.rows) + " but depth is " + size_str(cam.width, cam.height));
+      c.observed.mask = about(mask_path, [&] { return to_mask_float(m, mask_path); });
+      if (cv::countNonZero(c.observed.mask > 0) == 0) fail(mask_path, "the mask is empty (the robot is not in it)");
+    }
+    if (!out.empty() && c.observed.has_mask() != out.front().observed.has_mask())
+      fail(d.string(), "has " + std::string(c.observed.has_mask() ? "a" : "no") + " mask.png but capture '" +
+                           out.front().name + "' has " + (out.front().observed.has_mask() ? "one" : "none") +
+                           ": give every capture a mask, or none");
+    c.joint_positions = read_joints((d / "joints.json").string());
+    out.push_back(std::move(c));
+  }
+  return out;
+}
+
+// ---- Outputs ----
+
+std::string calibration_yaml(const Pose& base_from_camera, const std::string& base, const std::string& camera) {
+  const auto q = base_from_camera.quaternion_xyzw();
+  std::ostringstream y;
+  y.precision(9);
+  y << "# diffdope_calibrate: the camera's pose in the robot base frame (easy_handeye's layout, eye on base).\n"
+    << "eye_on_hand: false\nrobot_base_frame: " << base << "\ntracking_base_frame: " << camera
+    << "\ntransformation:\n  x: " << base_from_camera.t.x() << "\n  y: " << base_from_camera.t.y()
+    << "\n  z: " << base_from_camera.t.z() << "\n  qx: " << q[0] << "\n  qy: " << q[1] << "\n  qz: " << q[2]
+    << "\n  qw: " << q[3] << "\n";
+  return y.str();
+}
+
+std::string launch_snippet(const Pose& base_from_camera, const std::string& base, const std::string& camera) {
+  const auto q = base_from_camera.quaternion_xyzw();
+  std::ostringstream l;
+  l.precision(9);
+  l << "<!-- diffdope_calibrate: the calibrated camera (" << camera << ") in the robot base frame (" << base
+    << ").\n     If your camera driver already publishes a parent of " << camera
+    << " (e.g. camera_link), publish the\n     transform to that parent instead (compose with the driver's "
+    << "camera_link -> optical transform). -->\n<launch>\n  <node pkg=\"tf2_ros\" type=\"static_transform_publisher\" "
+    << "name=\"diffdope_camera_calibration\"\n        args=\"" << base_from_camera.t.x() << " " << base_from_camera.t.y()
+    << " " << base_from_camera.t.z() << " " << q[0] << " " << q[1] << " " << q[2] << " " << q[3] << " " << base << " "
+    << camera << "\"/>\n</launch>\n";
+  return l.str();
+}
+
+int run(const Args& a) {
+  CalibrationOptions options;
+  if (!a.config.empty()) {
+    check_file(a.config);
+    options.refiner = about(a.config, [&] { return RefinerOptions::from_yaml_file(a.config, options.refiner); });
+  }
+  if (a.passes > 0) options.passes = a.passes;
+  if (a.mask_margin >= 0) options.mask_margin = a.mask_margin;
+  about("options", [&] { options.validate(); });
+
+  check_file(a.urdf);
+  const PackageResolver resolve = [&](const std::string& pkg) -> std::string {
+    const auto it = a.packages.find(pkg);
+    if (it != a.packages.end()) return it->second;
+    if (const char* rpp = std::getenv("ROS_PACKAGE_PATH")) {  // offline, without roslib
+      std::stringstream ss(rpp);
+      std::string root;
+      while (std::getline(ss, root, ':'))
+        if (!root.empty() && fs::exists(fs::path(root) / pkg / "package.xml")) return (fs::path(root) / pkg).string();
+    }
+    throw std::runtime_error("package '" + pkg + "' not found (give --package-path " + pkg + "=DIR)");
+  };
+  const RobotModel robot = about(a.urdf, [&] {
+    QuietStderr quiet;  // urdfdom and assimp print their own complaints
+    return RobotModel::load_urdf(a.urdf, resolve);
+  });
+  std::vector<CalibrationCapture> captures = read_captures(a);
+  for (const CalibrationCapture& c : captures)  // every joint the robot needs, named in the capture's file
+    about((fs::path(a.captures) / c.name / "joints.json").string(), [&] { robot.link_poses(c.joint_positions); });
+  const Pose base_from_camera0 = read_pose_file(a.init);
+  const Pose initial = base_from_camera0.inverse();  // camera <- base
+
+  std::error_code ec;
+  fs::create_directories(a.out, ec);
+  if (ec) fail(a.out, "cannot create the output folder: " + ec.message());
+
+  Calibrator calibrator(options);
+  const bool progress = !a.quiet && isatty(2);
+  if (progress)
+    calibrator.on_iteration = [&](int p, int k, int total, double loss) {
+      std::fprintf(stderr, "\rpass %d/%d  iteration %3d/%d  loss %.5f ", p + 1, options.passes, k, total, loss);
+    };
+  CalibrationResult r;
+  try {
+    r = calibrator.calibrate(robot, captures, initial);
+  } catch (const std::invalid_argument& e) {
+    if (progress) std::fprintf(stderr, "\n");
+    fail(a.captures, one_line(e.what()));
+  }
+  if (progress) std::fprintf(stderr, "\n");
+  const Pose base_from_camera = r.camera_from_base.inverse();
+  const std::string base = a.base_frame.empty() ? robot.root_link() : a.base_frame;
+
+  // Overlays: the robot at the guess (red) and calibrated (green) over each capture.
+  const auto renderer = make_cpu_renderer();
+  for (const CalibrationCapture& c : captures) {
+    const Mesh posed = merge_meshes(robot.posed_visuals(c.joint_positions), c.name);
+    cv::Mat bgr;
+    if (c.observed.has_rgb()) {
+      bgr = to_bgr8(c.observed.rgb);
+    } else {  // depth as grey
+      cv::Mat d;
+      c.observed.depth.convertTo(d, CV_8U, 255.0 / 3.0);
+      cv::cvtColor(d, bgr, cv::COLOR_GRAY2BGR);
+    }
+    const auto imgs = renderer->render(c.camera, posed, {initial, r.camera_from_base});
+    draw_render(bgr, imgs[0], cv::Scalar(0, 0, 255), 1);
+    draw_render(bgr, imgs[1], cv::Scalar(0, 255, 0), 2);
+    put_label(bgr, "guess", cv::Point(8, 24), cv::Scalar(0, 0, 255), 0.6);
+    put_label(bgr, "calibrated", cv::Point(8, 48), cv::Scalar(0, 255, 0), 0.6);
+    write_image((fs::path(a.out) / ("overlay_" + c.name + ".png")).string(), bgr);
+  }
+
+  std::ostringstream table;
+  table << "capture          loss     mask IoU  depth inliers  median |depth error|  mask\n";
+  for (const CaptureResidual& c : r.captures) {
+    char line[200];
+    std::snprintf(line, sizeof line, "%-14s  %7.4f  %8.3f  %13.3f  %15.2f mm    %s\n", c.name.c_str(), c.loss,
+                  c.mask_iou, c.depth_inliers, c.depth_median_mm, c.derived_mask ? "derived" : "given");
+    table << line;
+  }
+  const double moved_mm = 1e3 * (base_from_camera.t - base_from_camera0.t).norm();
+  const double moved_deg = Eigen::AngleAxisd(base_from_camera.R * base_from_camera0.R.transpose()).angle() * 180 / M_PI;
+  json result{{"base_from_camera", pose_json(base_from_camera)},
+              {"camera_from_base", pose_json(r.camera_from_base)},
+              {"initial_base_from_camera", pose_json(base_from_camera0)},
+              {"moved_from_guess", {{"mm", moved_mm}, {"deg", moved_deg}}},
+              {"plausible", r.plausible},
+              {"confidence", r.confidence},
+              {"passes", r.passes},
+              {"time_s", r.time_ms / 1e3},
+              {"robot_base_frame", base},
+              {"camera_frame", a.camera_frame}};
+  json rows = json::array();
+  for (const CaptureResidual& c : r.captures)
+    rows.push_back({{"name", c.name}, {"loss", c.loss}, {"mask_iou", c.mask_iou}, {"depth_inliers", c.depth_inliers},
+                    {"depth_median_mm", c.depth_median_mm}, {"derived_mask", c.derived_mask}});
+  result["captures"] = rows;
+  std::string truth_line;
+  if (!a.truth.empty()) {
+    const Pose truth = read_pose_file(a.truth);  // base <- camera
+    const double mm = 1e3 * (base_from_camera.t - truth.t).norm();
+    const double deg = Eigen::AngleAxisd(base_from_camera.R * truth.R.transpose()).angle() * 180 / M_PI;
+    result["error_vs_truth"] = {{"camera_position_mm", mm}, {"rotation_deg", deg}};
+    truth_line = "error against " + a.truth + ": camera position " + fmt(mm, "%.2f") + " mm, rotation " +
+                 fmt(deg, "%.3f") + " deg\n";
+  }
+  write_text((fs::path(a.out) / "calibration.yaml").string(), calibration_yaml(base_from_camera, base, a.camera_frame));
+  write_text((fs::path(a.out) / "calibration.launch").string(), launch_snippet(base_from_camera, base, a.camera_frame));
+  write_text((fs::path(a.out) / "residuals.txt").string(), table.str());
+  write_text((fs::path(a.out) / "result.json").string(), result.dump(2) + "\n");
+  if (!a.quiet) {
+    std::printf("%s", table.str().c_str());
+    std::printf("camera in %s: t = [%.4f %.4f %.4f] m, quaternion [%.5f %.5f %.5f %.5f] (moved %.1f mm, %.2f deg "
+                "from the guess)\n%s, confidence %.2f; %d capture(s), %.1f s\n%s",
+                base.c_str(), base_from_camera.t.x(), base_from_camera.t.y(), base_from_camera.t.z(),
+                base_from_camera.quaternion_xyzw()[0], base_from_camera.quaternion_xyzw()[1],
+                base_from_camera.quaternion_xyzw()[2], base_from_camera.quaternion_xyzw()[3], moved_mm, moved_deg,
+                r.plausible ? "plausible" : "NOT plausible (check the overlays and the residuals)", r.confidence,
+                int(captures.size()), r.time_ms / 1e3, truth_line.c_str());
+  }
+  return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  cv::utils::logging::setLogLevel(cv::utils::logging::LOG_LEVEL_SILENT);
+  Args a;
+  std::string generate_dir;
+  int count = 3;
+  uint64_t seed = 1;
+  double init_cm = 5, init_deg = 10;
+  bool masks = true, rgb = true;
+  try {
+    for (int i = 1; i < argc; ++i) {
+      const std::string k = argv[i];
+      if (k == "-h" || k == "--help") {
+        std::cout << kUsage;
+        return 0;
+      }
+      if (k == "--quiet") { a.quiet = true; continue; }
+      if (k == "--no-mask") { masks = false; continue; }
+      if (k == "--no-rgb") { rgb = false; continue; }
+      if (i + 1 >= argc) return usage_error(k + ": missing value");
+      const std::string v = argv[++i];
+      if (k == "--urdf") a.urdf = v;
+      else if (k == "--captures") a.captures = v;
+      else if (k == "--camera") a.camera = v;
+      else if (k == "--init") a.init = v;
+      else if (k == "--out") a.out = v;
+      else if (k == "--config") a.config = v;
+      else if (k == "--truth") a.truth = v;
+      else if (k == "--robot-base-frame") a.base_frame = v;
+      else if (k == "--camera-frame") a.camera_frame = v;
+      else if (k == "--depth-scale") a.depth_scale = parse_number(k, v);
+      else if (k == "--mask-margin") a.mask_margin = parse_number(k, v);
+      else if (k == "--passes") a.passes = int(parse_integer_arg(k, v, 1, 10));
+      else if (k == "--package-path") {
+        const size_t eq = v.find('=');
+        if (eq == std::string::npos || eq == 0 || eq + 1 == v.size())
+          return usage_error("--package-path: expected NAME=DIR, got '" + v + "'");
+        a.packages[v.substr(0, eq)] = v.substr(eq + 1);
+      } else if (k == "--generate") generate_dir = v;
+      else if (k == "--count") count = int(parse_integer_arg(k, v, 1, 100));
+      else if (k == "--seed") seed = uint64_t(parse_integer_arg(k, v, 0, 1LL << 62));
+      else if (k == "--init-error") {
+        if (i + 1 >= argc) return usage_error("--init-error: expected CM DEG");
+        init_cm = parse_number(k, v);
+        init_deg = parse_number(k, argv[++i]);
+        if (init_cm < 0 || init_deg < 0 || init_cm > 100 || init_deg > 90)
+          return usage_error("--init-error: CM in [0, 100], DEG in [0, 90]");
+      } else return usage_error("unknown option '" + k + "'");
+    }
+    if (!(a.depth_scale > 0)) return usage_error("--depth-scale must be positive");
+  } catch (const std::invalid_argument& e) {
+    return usage_error(e.what());
+  }
+  try {
+    if (!generate_dir.empty()) return generate(generate_dir, count, seed, init_cm, init_deg, masks, rgb);
+    for (const auto& [flag, value] : {std::pair<const char*, std::string>{"--urdf", a.urdf}, {"--captures", a.captures},
+                                      {"--camera", a.camera}, {"--init", a.init}, {"--out", a.out}})
+      if (value.empty()) return usage_error(std::string(flag) + " is required");
+    return run(a);
+  } catch (const InputError& e) {
+    std::cerr << "diffdope_calibrate: " << e.file << ": " << one_line(e.what()) << "\n";
+    return 1;
+  } catch (const std::exception& e) {
+    std::cerr << "diffdope_calibrate: " << one_line(e.what()) << "\n";
+    return 1;
+  }
+}
