@@ -92,4 +92,12 @@ class Calibrator {
   std::unique_ptr<Renderer> renderer_;  // single renders: derived masks, residuals (CPU)
 };
 
+/// The calibration as easy_handeye saves it (eye on base): eye_on_hand, robot_base_frame, tracking_base_frame
+/// and transformation {x, y, z, qx, qy, qz, qw}, the camera's pose in the base frame.
+std::string easy_handeye_yaml(const Pose& base_from_camera, const std::string& base_frame,
+                              const std::string& camera_frame);
+/// A roslaunch file publishing it with tf2_ros's static_transform_publisher.
+std::string static_transform_launch(const Pose& base_from_camera, const std::string& base_frame,
+                                    const std::string& camera_frame);
+
 }  // namespace diffdope

@@ -7,6 +7,7 @@
 #include <chrono>
 #include <cmath>
 #include <limits>
+#include <sstream>
 
 #include "diffdope/option_range.hpp"
 
@@ -152,6 +153,32 @@ CalibrationResult Calibrator::calibrate(const RobotModel& robot, const std::vect
   }
   out.time_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
   return out;
+}
+
+std::string easy_handeye_yaml(const Pose& base_from_camera, const std::string& base, const std::string& camera) {
+  const auto q = base_from_camera.quaternion_xyzw();
+  std::ostringstream y;
+  y.precision(9);
+  y << "# diffdope_ros calibration: the camera's pose in the robot base frame (easy_handeye's layout, eye on base).\n"
+    << "eye_on_hand: false\nrobot_base_frame: " << base << "\ntracking_base_frame: " << camera
+    << "\ntransformation:\n  x: " << base_from_camera.t.x() << "\n  y: " << base_from_camera.t.y()
+    << "\n  z: " << base_from_camera.t.z() << "\n  qx: " << q[0] << "\n  qy: " << q[1] << "\n  qz: " << q[2]
+    << "\n  qw: " << q[3] << "\n";
+  return y.str();
+}
+
+std::string static_transform_launch(const Pose& base_from_camera, const std::string& base, const std::string& camera) {
+  const auto q = base_from_camera.quaternion_xyzw();
+  std::ostringstream l;
+  l.precision(9);
+  l << "<!-- diffdope_ros calibration: the calibrated camera (" << camera << ") in the robot base frame (" << base
+    << ").\n     If your camera driver already publishes a parent of " << camera
+    << " (e.g. camera_link), publish the\n     transform to that parent instead (compose with the driver's "
+    << "camera_link -> optical transform). -->\n<launch>\n  <node pkg=\"tf2_ros\" type=\"static_transform_publisher\" "
+    << "name=\"diffdope_camera_calibration\"\n        args=\"" << base_from_camera.t.x() << " " << base_from_camera.t.y()
+    << " " << base_from_camera.t.z() << " " << q[0] << " " << q[1] << " " << q[2] << " " << q[3] << " " << base << " "
+    << camera << "\"/>\n</launch>\n";
+  return l.str();
 }
 
 }  // namespace diffdope

@@ -232,32 +232,6 @@ std::vector<CalibrationCapture> read_captures(const Args& a) {
 
 // ---- Outputs ----
 
-std::string calibration_yaml(const Pose& base_from_camera, const std::string& base, const std::string& camera) {
-  const auto q = base_from_camera.quaternion_xyzw();
-  std::ostringstream y;
-  y.precision(9);
-  y << "# diffdope_calibrate: the camera's pose in the robot base frame (easy_handeye's layout, eye on base).\n"
-    << "eye_on_hand: false\nrobot_base_frame: " << base << "\ntracking_base_frame: " << camera
-    << "\ntransformation:\n  x: " << base_from_camera.t.x() << "\n  y: " << base_from_camera.t.y()
-    << "\n  z: " << base_from_camera.t.z() << "\n  qx: " << q[0] << "\n  qy: " << q[1] << "\n  qz: " << q[2]
-    << "\n  qw: " << q[3] << "\n";
-  return y.str();
-}
-
-std::string launch_snippet(const Pose& base_from_camera, const std::string& base, const std::string& camera) {
-  const auto q = base_from_camera.quaternion_xyzw();
-  std::ostringstream l;
-  l.precision(9);
-  l << "<!-- diffdope_calibrate: the calibrated camera (" << camera << ") in the robot base frame (" << base
-    << ").\n     If your camera driver already publishes a parent of " << camera
-    << " (e.g. camera_link), publish the\n     transform to that parent instead (compose with the driver's "
-    << "camera_link -> optical transform). -->\n<launch>\n  <node pkg=\"tf2_ros\" type=\"static_transform_publisher\" "
-    << "name=\"diffdope_camera_calibration\"\n        args=\"" << base_from_camera.t.x() << " " << base_from_camera.t.y()
-    << " " << base_from_camera.t.z() << " " << q[0] << " " << q[1] << " " << q[2] << " " << q[3] << " " << base << " "
-    << camera << "\"/>\n</launch>\n";
-  return l.str();
-}
-
 int run(const Args& a) {
   CalibrationOptions options;
   if (!a.config.empty()) {
@@ -365,8 +339,8 @@ int run(const Args& a) {
     truth_line = "error against " + a.truth + ": camera position " + fmt(mm, "%.2f") + " mm, rotation " +
                  fmt(deg, "%.3f") + " deg\n";
   }
-  write_text((fs::path(a.out) / "calibration.yaml").string(), calibration_yaml(base_from_camera, base, a.camera_frame));
-  write_text((fs::path(a.out) / "calibration.launch").string(), launch_snippet(base_from_camera, base, a.camera_frame));
+  write_text((fs::path(a.out) / "calibration.yaml").string(), easy_handeye_yaml(base_from_camera, base, a.camera_frame));
+  write_text((fs::path(a.out) / "calibration.launch").string(), static_transform_launch(base_from_camera, base, a.camera_frame));
   write_text((fs::path(a.out) / "residuals.txt").string(), table.str());
   write_text((fs::path(a.out) / "result.json").string(), result.dump(2) + "\n");
   if (!a.quiet) {

@@ -1,0 +1,60 @@
+// JointHistory (joint_history.hpp): the joints that go with an image, and refusing images taken while moving.
+#include <gtest/gtest.h>
+
+#include "diffdope/joint_history.hpp"
+
+using namespace diffdope;
+
+namespace {
+
+JointReading reading(double t, double q, double v = 0, bool with_velocity = false) {
+  JointReading r;
+  r.stamp = t;
+  r.position = {{"a", q}, {"b", 0.5}};
+  if (with_velocity) r.velocity = {{"a", v}, {"b", 0.0}};
+  return r;
+}
+
+}  // namespace
+
+TEST(JointHistory, StillRobotGivesTheNearestPositions) {
+  JointHistory h;
+  for (int k = 0; k <= 100; ++k) h.add(reading(10.0 + 0.01 * k, 1.0 + 1e-5 * k));  // 0.001 rad/s: still
+  std::string why;
+  const auto q = h.still_at(10.5, &why);
+  ASSERT_TRUE(q.has_value()) << why;
+  EXPECT_NEAR(q->at("a"), 1.0005, 1e-9);
+  EXPECT_DOUBLE_EQ(q->at("b"), 0.5);
+}
+
+TEST(JointHistory, RefusesWhatItCannotVouchFor) {
+  JointHistory h;
+  std::string why;
+  EXPECT_FALSE(h.still_at(10.0, &why));
+  EXPECT_NE(why.find("no joint states"), std::string::npos);
+  // Moving at 0.5 rad/s (positions only), then still.
+  for (int k = 0; k <= 100; ++k) h.add(reading(10.0 + 0.01 * k, k <= 50 ? 0.005 * k : 0.25));
+  EXPECT_FALSE(h.still_at(10.3, &why));
+  EXPECT_NE(why.find("moving: joint 'a' at 0.5"), std::string::npos) << why;
+  EXPECT_TRUE(h.still_at(10.75, &why)) << why;
+  // The window after the image is not covered yet.
+  EXPECT_FALSE(h.still_at(10.95, &why));
+  EXPECT_NE(why.find("do not yet cover"), std::string::npos) << why;
+  // No reading near the stamp (another clock?).
+  EXPECT_FALSE(h.still_at(20.0, &why));
+  EXPECT_NE(why.find("no joint state within"), std::string::npos) << why;
+}
+
+TEST(JointHistory, ReportedVelocitiesCountAndOldReadingsGo) {
+  StillnessOptions o;
+  o.keep = 2.0;
+  JointHistory h(o);
+  for (int k = 0; k <= 100; ++k) h.add(reading(10.0 + 0.01 * k, 1.0, k == 50 ? 0.2 : 0.0, true));
+  std::string why;
+  EXPECT_FALSE(h.still_at(10.5, &why));
+  EXPECT_NE(why.find("joint 'a' at 0.2"), std::string::npos) << why;
+  h.add(reading(13.0, 1.0));  // three seconds later: the first second is dropped
+  EXPECT_LT(h.size(), 102u);
+  o.max_velocity = 0;
+  EXPECT_THROW(JointHistory{o}, std::invalid_argument);
+}
