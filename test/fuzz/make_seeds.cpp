@@ -130,6 +130,23 @@ void text_seeds(const std::string& repo) {
   seed("objects_config", "symmetries.yaml",
        "objects:\n  - name: can\n    mesh: /tmp/can.ply\n    symmetries:\n      continuous: [{axis: [0, 0, 1], "
        "offset: [0, 0, 0.05]}]\n      discrete: [{translation: [0, 0, 0.1], rotation: [1, 0, 0, 0]}]\n");
+  seed("urdf", "primitives.urdf",
+       "<?xml version=\"1.0\"?>\n<robot name=\"arm\">\n  <material name=\"o\"><color rgba=\"0.9 0.5 0.1 1\"/></material>\n"
+       "  <link name=\"base\"><visual><origin xyz=\"0 0 0.05\" rpy=\"0 0 0\"/><geometry><box size=\"0.2 0.2 0.1\"/>"
+       "</geometry><material name=\"o\"/></visual></link>\n"
+       "  <link name=\"upper\"><visual><geometry><cylinder radius=\"0.04\" length=\"0.3\"/></geometry></visual></link>\n"
+       "  <link name=\"finger_a\"><visual><geometry><sphere radius=\"0.02\"/></geometry></visual></link>\n"
+       "  <link name=\"finger_b\"><visual><geometry><sphere radius=\"0.02\"/></geometry></visual></link>\n"
+       "  <joint name=\"shoulder\" type=\"revolute\"><parent link=\"base\"/><child link=\"upper\"/>"
+       "<origin xyz=\"0 0 0.1\"/><axis xyz=\"0 1 0\"/><limit lower=\"-1\" upper=\"1\" effort=\"1\" velocity=\"1\"/></joint>\n"
+       "  <joint name=\"grip\" type=\"prismatic\"><parent link=\"upper\"/><child link=\"finger_a\"/>"
+       "<origin xyz=\"0 0.02 0.3\"/><axis xyz=\"0 1 0\"/><limit lower=\"0\" upper=\"0.04\" effort=\"1\" velocity=\"1\"/></joint>\n"
+       "  <joint name=\"grip_mimic\" type=\"prismatic\"><parent link=\"upper\"/><child link=\"finger_b\"/>"
+       "<origin xyz=\"0 -0.02 0.3\"/><axis xyz=\"0 -1 0\"/><limit lower=\"0\" upper=\"0.04\" effort=\"1\" velocity=\"1\"/>"
+       "<mimic joint=\"grip\" multiplier=\"1\" offset=\"0\"/></joint>\n</robot>\n");
+  seed("urdf", "mesh.urdf",
+       "<robot name=\"m\"><link name=\"a\"><visual><geometry><mesh filename=\"package://x/a.stl\" scale=\"1 1 -1\"/>"
+       "</geometry></visual></link></robot>\n");
   seed("camera_pose", "fxfy_R.txt",
        std::string("{\"fx\": 600, \"fy\": 600, \"cx\": 319.5, \"cy\": 239.5, \"width\": 640, \"height\": 480}") + kSplit +
            "camera_matrix:\n  rows: 3\n  cols: 3\n  data: [600, 0, 320, 0, 600, 240, 0, 0, 1]\nimage_width: 640\n"

@@ -108,6 +108,31 @@ TEST(RobotModel, ReadsTheUrdfAndPlacesTheLinks) {
   EXPECT_THROW(robot.link_poses(q), std::invalid_argument);
 }
 
+TEST(RobotModel, PrimitivesPrismaticAndMimicJoints) {
+  const std::string xml =
+      "<robot name=\"gripper\"><material name=\"o\"><color rgba=\"0.9 0.5 0.1 1\"/></material>"
+      "<link name=\"palm\"><visual><geometry><box size=\"0.1 0.05 0.02\"/></geometry><material name=\"o\"/></visual></link>"
+      "<link name=\"a\"><visual><geometry><sphere radius=\"0.01\"/></geometry></visual></link>"
+      "<link name=\"b\"><visual><geometry><cylinder radius=\"0.01\" length=\"0.04\"/></geometry></visual></link>"
+      "<joint name=\"grip\" type=\"prismatic\"><parent link=\"palm\"/><child link=\"a\"/><origin xyz=\"0 0.02 0\"/>"
+      "<axis xyz=\"0 1 0\"/><limit lower=\"0\" upper=\"0.04\" effort=\"1\" velocity=\"1\"/></joint>"
+      "<joint name=\"grip_b\" type=\"prismatic\"><parent link=\"palm\"/><child link=\"b\"/><origin xyz=\"0 -0.02 0\"/>"
+      "<axis xyz=\"0 -1 0\"/><limit lower=\"0\" upper=\"0.04\" effort=\"1\" velocity=\"1\"/>"
+      "<mimic joint=\"grip\" multiplier=\"2\" offset=\"0.001\"/></joint></robot>";
+  const RobotModel robot = RobotModel::parse_urdf(xml, ".", "gripper.urdf");
+  EXPECT_EQ(robot.joint_names(), std::vector<std::string>{"grip"});  // the mimic follows, it is not asked for
+  const auto links = robot.link_poses({{"grip", 0.01}});
+  EXPECT_TRUE(links.at("a").t.isApprox(Eigen::Vector3d(0, 0.03, 0), 1e-12));
+  EXPECT_TRUE(links.at("b").t.isApprox(Eigen::Vector3d(0, -0.041, 0), 1e-12)) << links.at("b").t.transpose();
+  ASSERT_EQ(robot.visuals().size(), 3u);
+  // The material's colour reaches the primitive.
+  const Mesh& palm = *robot.visuals()[0].mesh;
+  ASSERT_FALSE(palm.textures.empty());
+  EXPECT_NEAR(palm.textures[0].rgb[0], 0.9, 1e-6);
+  const Mesh merged = merge_meshes(robot.posed_visuals({{"grip", 0.01}}), "gripper");
+  EXPECT_NEAR(merged.bbox_max().y(), 0.04, 1e-6);  // the sphere's top at 0.03 + 0.01
+}
+
 TEST(RobotModel, RefusesWhatItCannotUse) {
   const std::string dir = temp_dir("bad");
   auto expect_error = [&](const std::string& xml, const std::string& needle) {
