@@ -28,11 +28,12 @@ class InstanceTracks {
   bool seen(int instance, double stamp) const;
 
   /// Which instance each pose of one detector message belongs to (all the object's detections at one stamp,
-  /// best first): (1) nearest pairs first, each pose to an unclaimed seen instance within `gate`; (2) the
-  /// others, in order, to free instances, lowest index first; (3) what is left, in order, to the nearest
-  /// unclaimed seen instance whatever the distance (with one instance: every detection reaches it, and the
-  /// refiner's loss decides between it and the track, as for a single object); -1 when every instance already
-  /// has a pose of this message (more detections than max_instances: the caller reports them).
+  /// best first). With one instance, the first (best) pose, wherever it is: as for an object without
+  /// instances, and the refiner's loss decides between it and the track. With several: (1) nearest pairs first,
+  /// each pose to an unclaimed seen instance within `gate`; (2) the others, in order, to free instances, lowest
+  /// index first; (3) what is left, in order, to the nearest unclaimed seen instance whatever the distance.
+  /// -1 when every instance already has a pose of this message (more detections than max_instances: the caller
+  /// reports them).
   std::vector<int> assign(const std::vector<Pose>& poses, double stamp) const;
   /// assign(), then each assigned pose becomes its instance's detection. Returns assign()'s answer.
   std::vector<int> add_detections(const std::vector<Pose>& poses, double stamp);

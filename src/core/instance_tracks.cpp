@@ -32,6 +32,10 @@ bool InstanceTracks::seen(int instance, double stamp) const {
 std::vector<int> InstanceTracks::assign(const std::vector<Pose>& poses, double stamp) const {
   const int n = int(poses.size()), m = size();
   std::vector<int> of_pose(size_t(n), -1);
+  if (m == 1) {  // one instance: the best detection, as for an object without instances (the detector's ranking)
+    if (n > 0) of_pose[0] = 0;
+    return of_pose;
+  }
   std::vector<bool> claimed(size_t(m), false);
   std::vector<Eigen::Vector3d> centre(static_cast<size_t>(n));
   for (int p = 0; p < n; ++p) centre[size_t(p)] = poses[size_t(p)] * pivot_;

@@ -159,7 +159,8 @@ RobotModel RobotModel::parse_urdf(const std::string& xml, const std::string& bas
   for (const Joint& j : model.joints_)
     if (!j.mimic.empty()) {
       bool found = false;
-      for (const Joint& k : model.joints_) found = found || (k.name == j.mimic && k.mimic.empty());
+      for (const Joint& k : model.joints_)
+        found = found || (k.name == j.mimic && k.mimic.empty() && k.type != Joint::Type::kFixed);
       if (!found)
         throw std::runtime_error(origin + ": joint '" + j.name + "' mimics '" + j.mimic +
                                  "', which is not a movable joint of the model (or mimics another)");

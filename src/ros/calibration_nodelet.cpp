@@ -189,7 +189,14 @@ bool CalibrationNodelet::onTakeSample(std_srvs::Trigger::Request&, std_srvs::Tri
   {
     std::lock_guard<std::mutex> l(input_mutex_);
     if (depth_.empty()) return fail("no depth image received on " + depth_sub_.getTopic());
+    // The newest image whose stillness window the joint states already cover (at 30 Hz the very newest is a
+    // few tens of milliseconds old, less than the window after it that must be seen still).
     depth = depth_.back();
+    for (auto it = depth_.rbegin(); it != depth_.rend(); ++it)
+      if (joints_->covers((*it)->header.stamp.toSec())) {
+        depth = *it;
+        break;
+      }
     const ros::Time stamp = depth->header.stamp;
     info = nearest(info_, stamp, max_interval_);
     if (!info) return fail("no camera_info on " + info_sub_.getTopic() + " within ~max_interval of the depth image");
@@ -250,6 +257,7 @@ bool CalibrationNodelet::onRemoveSample(RemoveSample::Request& req, RemoveSample
     res.message = "no sample " + std::to_string(req.index) + " (" + std::to_string(n) + " taken)";
   } else {
     samples_.erase(samples_.begin() + index);
+    result_.reset();  // (~save must not write a result of other samples)
     res.success = true;
     res.message = "sample " + std::to_string(index) + " removed";
   }
@@ -278,6 +286,7 @@ bool CalibrationNodelet::onCompute(ComputeCalibration::Request&, ComputeCalibrat
   const auto fail = [&](const std::string& why) {
     res.success = false;
     res.message = why;
+    result_.reset();
     errors_.warn("compute", "~compute: " + why);
     return true;
   };
@@ -317,8 +326,33 @@ bool CalibrationNodelet::onCompute(ComputeCalibration::Request&, ComputeCalibrat
                 format_fixed(1e3 * (base_from_camera.t - base_from_guess.t).norm(), 1) + " mm from the guess, " +
                 (r.plausible ? "plausible" : "NOT plausible (check the residuals)") + ", confidence " +
                 format_fixed(r.confidence, 2);
+  // An implausible result is returned (and may be saved) but not put on TF, where it would become the next
+  // guess and every listener's camera pose.
+  if (publish_tf_ && r.plausible) {
+    // A camera driver usually publishes camera_link -> optical frame: a second parent for the optical frame would
+    // break the tree, so the calibration goes to that parent (base -> camera_link), composed with the driver's.
+    geometry_msgs::TransformStamped on_tf = res.transform;
+    std::string parent;
+    if (tf_buffer_->_getParent(camera_frame_, ros::Time(0), parent) && !parent.empty() && parent != base_frame_) {
+      try {
+        const geometry_msgs::TransformStamped p = tf_buffer_->lookupTransform(parent, camera_frame_, ros::Time(0));
+        const diffdope::Pose parent_from_camera = pose_from_transform(p.transform, "TF " + parent);
+        on_tf.child_frame_id = parent;
+        on_tf.transform = transform_to_msg(base_from_camera * parent_from_camera.inverse());
+      } catch (const std::exception& e) {
+        on_tf.child_frame_id.clear();
+        res.message += "; not published on TF: " + camera_frame_ + " has the parent " + parent +
+                       " whose transform cannot be read (" + e.what() + ")";
+      }
+    }
+    if (!on_tf.child_frame_id.empty()) {
+      static_tf_->sendTransform(on_tf);
+      res.message += "; published on TF as " + base_frame_ + " -> " + on_tf.child_frame_id;
+    }
+  } else if (publish_tf_) {
+    res.message += "; not published on TF";
+  }
   NODELET_INFO_STREAM(res.message);
-  if (publish_tf_) static_tf_->sendTransform(res.transform);
   result_ = res;
   return true;
 }

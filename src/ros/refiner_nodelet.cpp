@@ -289,6 +289,7 @@ void RefinerNodelet::setupInputs() {
 }
 
 RefinerNodelet::~RefinerNodelet() {
+  reconfigure_server_.reset();  // (its callback uses the members below)
   {
     std::lock_guard<std::mutex> lock(work_mutex_);
     stop_ = true;
@@ -450,7 +451,14 @@ void RefinerNodelet::storeDetections(const std::vector<geometry_msgs::PoseStampe
   }
   if (usable.empty()) return;
   std::lock_guard<std::mutex> lock(detections_mutex_);
-  slots_[slot]->pending_detections = std::move(usable);  // the newest message wins, as for one object
+  auto& pending = slots_[slot]->pending_detections;
+  // The newest message wins; but with several instances, messages of the same stamp are one detection round
+  // (a detector that publishes a PoseStamped per instance, one after the other).
+  if (pending && !pending->empty() && slots_[slot]->config.max_instances > 1 &&
+      pending->front().header.stamp == usable.front().header.stamp)
+    pending->insert(pending->end(), usable.begin(), usable.end());
+  else
+    pending = std::move(usable);
 }
 
 void RefinerNodelet::subscribeDetectionArray() {

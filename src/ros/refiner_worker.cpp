@@ -89,9 +89,12 @@ void RefinerNodelet::applyPendingSettings() {
       if (slot->tracks) slot->tracks->set_options(settings->track);
   } catch (const std::invalid_argument& e) {  // (checked by the callback already: a bug guard)
     errors_.error("reconfigure", std::string("reconfigured values not applied: ") + e.what());
-    if (refiner_) refiner_->set_options(refiner_options_);
-    for (auto& slot : slots_)
-      if (slot->tracks) slot->tracks->set_options(track_options_);
+    try {  // back to the values in force (valid: they were accepted before)
+      if (refiner_) refiner_->set_options(refiner_options_);
+      for (auto& slot : slots_)
+        if (slot->tracks) slot->tracks->set_options(track_options_);
+    } catch (const std::exception&) {
+    }
     return;
   }
   refiner_options_ = settings->refiner;
@@ -395,7 +398,12 @@ std::vector<diffdope_ros::RefinedPose> RefinerNodelet::refineAndPublish(
   struct CallOptions {
     diffdope::Refiner& refiner;
     const diffdope::RefinerOptions saved;
-    ~CallOptions() { refiner.set_options(saved); }  // (valid: they were in force)
+    ~CallOptions() {
+      try {
+        refiner.set_options(saved);  // (they were in force, so valid: this cannot throw today)
+      } catch (...) {
+      }
+    }
   } call{*refiner_, refiner_->options()};
   refiner_->set_options(options);
   const ros::WallTime refine_start = ros::WallTime::now();

@@ -6,6 +6,7 @@
 #include <ros/ros.h>
 #include <std_srvs/Trigger.h>
 #include <tf2_ros/buffer.h>
+#include <tf2_ros/static_transform_broadcaster.h>
 #include <tf2_ros/transform_listener.h>
 
 #include <fstream>
@@ -67,7 +68,9 @@ TEST(CalibrationNode, SamplesComputeTfAndSave) {
   EXPECT_EQ(c.response.transform.header.frame_id, "base_link");
   EXPECT_EQ(c.response.transform.child_frame_id, "camera_color_optical_frame");
 
-  // The static TF carries it.
+  // The static TF carries it, published to the optical frame's parent (camera_link, the "driver's").
+  EXPECT_NE(c.response.message.find("published on TF as base_link -> camera_link"), std::string::npos)
+      << c.response.message;
   tf2_ros::Buffer tf;
   tf2_ros::TransformListener listener(tf);
   // (Polled in wall time: the bag has ended, so simulated time no longer moves.)
@@ -107,5 +110,16 @@ int main(int argc, char** argv) {
   ros::NodeHandle nh;
   ros::AsyncSpinner spinner(1);
   spinner.start();
+  // As a camera driver does: camera_link -> optical frame (REP 103: the optical z is camera_link's x). The node
+  // must then publish the calibration as base_link -> camera_link. (Debian's tf2_ros has no
+  // static_transform_publisher executable, so the test publishes it.)
+  tf2_ros::StaticTransformBroadcaster driver;
+  geometry_msgs::TransformStamped t;
+  t.header.stamp = ros::Time::now();
+  t.header.frame_id = "camera_link";
+  t.child_frame_id = "camera_color_optical_frame";
+  t.transform.translation.x = 0.01, t.transform.translation.y = 0.02;
+  t.transform.rotation.x = -0.5, t.transform.rotation.y = 0.5, t.transform.rotation.z = -0.5, t.transform.rotation.w = 0.5;
+  driver.sendTransform(t);
   return RUN_ALL_TESTS();
 }

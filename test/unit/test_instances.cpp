@@ -33,8 +33,8 @@ TEST(InstanceTracks, OneInstanceTakesEveryDetectionAsAnObjectTrackDoes) {
   auto seeds = t.track(0).seeds_for(10.1);
   ASSERT_EQ(seeds.size(), 1u);
   EXPECT_DOUBLE_EQ(seeds[0].pose.t.x(), 0.5);
-  // Two in one message: the nearer to what was seen wins, the other is reported.
-  EXPECT_EQ(t.add_detections({at(0.0), at(0.51)}, 10.2), std::vector<int>({-1, 0}));
+  // Two in one message: the first (the detector's best) wins wherever it is, the other is reported.
+  EXPECT_EQ(t.add_detections({at(0.0), at(0.51)}, 10.2), std::vector<int>({0, -1}));
 }
 
 TEST(InstanceTracks, StableIndicesByProximity) {

@@ -35,7 +35,7 @@ TEST(JointHistory, RefusesWhatItCannotVouchFor) {
   // Moving at 0.5 rad/s (positions only), then still.
   for (int k = 0; k <= 100; ++k) h.add(reading(10.0 + 0.01 * k, k <= 50 ? 0.005 * k : 0.25));
   EXPECT_FALSE(h.still_at(10.3, &why));
-  EXPECT_NE(why.find("moving: joint 'a' at 0.5"), std::string::npos) << why;
+  EXPECT_NE(why.find("moving: joint 'a' travelled"), std::string::npos) << why;
   EXPECT_TRUE(h.still_at(10.75, &why)) << why;
   // The window after the image is not covered yet.
   EXPECT_FALSE(h.still_at(10.95, &why));
@@ -43,6 +43,8 @@ TEST(JointHistory, RefusesWhatItCannotVouchFor) {
   // No reading near the stamp (another clock?).
   EXPECT_FALSE(h.still_at(20.0, &why));
   EXPECT_NE(why.find("no joint state within"), std::string::npos) << why;
+  EXPECT_FALSE(h.still_at(5.0, &why));  // long before every reading
+  EXPECT_NE(why.find("no state of joint 'a' within"), std::string::npos) << why;
 }
 
 TEST(JointHistory, ReportedVelocitiesCountAndOldReadingsGo) {
@@ -53,8 +55,40 @@ TEST(JointHistory, ReportedVelocitiesCountAndOldReadingsGo) {
   std::string why;
   EXPECT_FALSE(h.still_at(10.5, &why));
   EXPECT_NE(why.find("joint 'a' at 0.2"), std::string::npos) << why;
-  h.add(reading(13.0, 1.0));  // three seconds later: the first second is dropped
-  EXPECT_LT(h.size(), 102u);
+  h.add(reading(13.0, 1.0));  // three seconds later: all but the reading at 11.0 are dropped (two joints each)
+  EXPECT_EQ(h.size(), 4u);
+  h.add(reading(5.0, 1.0));  // time went back (a looped bag): the history starts afresh
+  EXPECT_EQ(h.size(), 2u);
   o.max_velocity = 0;
   EXPECT_THROW(JointHistory{o}, std::invalid_argument);
+}
+
+TEST(JointHistory, SeveralPublishersEachWithTheirJoints) {
+  // An arm ("a", "b") and a gripper ("g") publishing alternately; the arm moves at 0.2 rad/s.
+  JointHistory h;
+  for (int k = 0; k <= 100; ++k) {
+    JointReading arm, gripper;
+    arm.stamp = 10.0 + 0.01 * k;
+    arm.position = {{"a", 0.002 * k}, {"b", 0.5}};
+    gripper.stamp = arm.stamp + 0.005;
+    gripper.position = {{"g", 0.02}};
+    h.add(arm), h.add(gripper);
+  }
+  std::string why;
+  EXPECT_FALSE(h.still_at(10.5, &why));
+  EXPECT_NE(why.find("joint 'a'"), std::string::npos) << why;
+  // Still: every joint's position comes back, whichever message carried it.
+  JointHistory still;
+  for (int k = 0; k <= 100; ++k) {
+    JointReading arm, gripper;
+    arm.stamp = 10.0 + 0.01 * k;
+    arm.position = {{"a", 0.3}, {"b", 0.5}};
+    gripper.stamp = arm.stamp + 0.005;
+    gripper.position = {{"g", 0.02}};
+    still.add(arm), still.add(gripper);
+  }
+  const auto q = still.still_at(10.5, &why);
+  ASSERT_TRUE(q.has_value()) << why;
+  EXPECT_EQ(q->size(), 3u);
+  EXPECT_DOUBLE_EQ(q->at("g"), 0.02);
 }
