@@ -20,6 +20,10 @@ struct InputFileError : std::runtime_error {
 /// ("--frames: expected an integer, got '3x'", "--frames: 0 is outside [1, 100000]").
 long long parse_integer_arg(const std::string& flag, const std::string& text, long long lo, long long hi);
 
+/// A command-line value that must be a finite number ("--rate: expected a number, got 'fast'"); ranges are the
+/// caller's.
+double parse_number_arg(const std::string& flag, const std::string& text);
+
 /// Throws InputFileError unless `path` is a regular file that can be opened for reading.
 void check_input_file(const std::string& path);
 

@@ -144,6 +144,19 @@ long long parse_integer_arg(const std::string& flag, const std::string& text, lo
   return x;
 }
 
+double parse_number_arg(const std::string& flag, const std::string& text) {
+  size_t used = 0;
+  double x = 0;
+  try {
+    x = std::stod(text, &used);
+  } catch (const std::exception&) {
+    used = 0;
+  }
+  if (used == 0 || used != text.size() || !std::isfinite(x))
+    throw std::invalid_argument(flag + ": expected a number, got '" + text + "'");
+  return x;
+}
+
 void check_input_file(const std::string& path) {
   std::error_code ec;
   if (!fs::exists(path, ec)) fail(path, "file does not exist");

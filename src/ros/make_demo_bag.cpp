@@ -104,14 +104,12 @@ long long parse_int(const std::string& opt, const std::string& v, long long lo, 
 }
 
 double parse_double(const std::string& opt, const std::string& v, double lo, double hi, bool lo_inclusive) {
-  size_t used = 0;
   double x = 0;
   try {
-    x = std::stod(v, &used);
-  } catch (const std::exception&) {
-    used = 0;
+    x = diffdope::parse_number_arg(opt, v);
+  } catch (const std::invalid_argument& e) {
+    throw UsageError(e.what());
   }
-  if (used == 0 || used != v.size() || !std::isfinite(x)) throw UsageError(opt + ": expected a number, got '" + v + "'");
   if ((lo_inclusive ? x < lo : x <= lo) || x > hi) {
     std::ostringstream s;
     s << opt << ": " << v << " is out of range " << (lo_inclusive ? "[" : "(") << lo << ", " << hi << "]";

@@ -71,18 +71,6 @@ int usage_error(const std::string& what) {
   return 2;
 }
 
-double parse_number(const std::string& flag, const std::string& v) {
-  size_t used = 0;
-  double x = 0;
-  try {
-    x = std::stod(v, &used);
-  } catch (const std::exception&) {
-    used = 0;
-  }
-  if (used == 0 || used != v.size() || !std::isfinite(x)) throw std::invalid_argument(flag + ": expected a number, got '" + v + "'");
-  return x;
-}
-
 json pose_json(const Pose& p) {
   const auto q = p.quaternion_xyzw();
   return json{{"t", {p.t.x(), p.t.y(), p.t.z()}}, {"quaternion", {q[0], q[1], q[2], q[3]}}};
@@ -387,8 +375,8 @@ int main(int argc, char** argv) {
       else if (k == "--truth") a.truth = v;
       else if (k == "--robot-base-frame") a.base_frame = v;
       else if (k == "--camera-frame") a.camera_frame = v;
-      else if (k == "--depth-scale") a.depth_scale = parse_number(k, v);
-      else if (k == "--mask-margin") a.mask_margin = parse_number(k, v);
+      else if (k == "--depth-scale") a.depth_scale = parse_number_arg(k, v);
+      else if (k == "--mask-margin") a.mask_margin = parse_number_arg(k, v);
       else if (k == "--passes") a.passes = int(parse_integer_arg(k, v, 1, 10));
       else if (k == "--package-path") {
         const size_t eq = v.find('=');
@@ -400,8 +388,8 @@ int main(int argc, char** argv) {
       else if (k == "--seed") seed = uint64_t(parse_integer_arg(k, v, 0, 1LL << 62));
       else if (k == "--init-error") {
         if (i + 1 >= argc) return usage_error("--init-error: expected CM DEG");
-        init_cm = parse_number(k, v);
-        init_deg = parse_number(k, argv[++i]);
+        init_cm = parse_number_arg(k, v);
+        init_deg = parse_number_arg(k, argv[++i]);
         if (init_cm < 0 || init_deg < 0 || init_cm > 100 || init_deg > 90)
           return usage_error("--init-error: CM in [0, 100], DEG in [0, 90]");
       } else return usage_error("unknown option '" + k + "'");
