@@ -218,6 +218,15 @@ int main(int argc, char** argv) {
                            {"best_dy", r.print.best_dy}, {"far_mean", r.print.far_mean}, {"far_std", r.print.far_std},
                            {"pixels", r.print.pixels}, {"render_contrast", r.print.render_contrast}};
           if (r.curvature.valid) line["weakest_rise"] = r.curvature.weakest_rise;  // (pose_curvature.hpp)
+          // The best run that ended elsewhere (its pose's points > 1 cm from the winner's, ADD(-S)): how much
+          // worse its loss is, relative (a diagnostic of ambiguity; absent when every run agrees).
+          double rival = std::numeric_limits<double>::infinity();
+          for (size_t i = 0; i < r.run_poses.size(); ++i) {
+            if (int(i) == r.winner || !std::isfinite(r.run_losses[i])) continue;
+            const double d = sym ? adds_error(pts, r.run_poses[i], r.pose) : add_error(pts, r.run_poses[i], r.pose);
+            if (d > 0.01) rival = std::min(rival, r.run_losses[i]);
+          }
+          if (std::isfinite(rival) && r.loss.total > 0) line["rival_gap"] = rival / r.loss.total - 1.0;
           out << line.dump() << "\n";
           out.flush();
           std::fprintf(stderr, "\r%s scene %d sample %d: %.1f -> %.1f mm (%.0f ms)    ", level.c_str(), scene,
