@@ -24,6 +24,9 @@ long long parse_integer_arg(const std::string& flag, const std::string& text, lo
 /// caller's.
 double parse_number_arg(const std::string& flag, const std::string& text);
 
+/// The whole file as text; std::runtime_error "<path>: cannot open <what>" when it cannot be read.
+std::string read_text_file(const std::string& path, const std::string& what);
+
 /// Throws InputFileError unless `path` is a regular file that can be opened for reading.
 void check_input_file(const std::string& path);
 

@@ -13,6 +13,8 @@ namespace diffdope {
 Texture make_pattern_texture(int size, uint32_t seed);
 /// A "printed box" texture: smooth background with sharp-edged labels and stripes (realistic, less smooth).
 Texture make_label_texture(int size, uint32_t seed);
+/// One colour (a 1x1 texture): a part painted in a flat colour, e.g. a URDF primitive and its material.
+Texture make_flat_texture(const Eigen::Vector3f& rgb, const std::string& source = "flat colour");
 
 /// Box of the given size; each face has its own 4 vertices (UV seams on every edge), UVs in a 3x2 atlas.
 Mesh make_box(const Eigen::Vector3d& size, Texture texture);

@@ -20,6 +20,8 @@ namespace diffdope_ros {
 /// P is all zero, and then sets `*warning`. Throws on zero focal lengths, non-finite values, a zero size, or
 /// binning / ROI settings (not supported: publish full-resolution rectified images).
 diffdope::Camera camera_from_info(const sensor_msgs::CameraInfo& info, std::string* warning = nullptr);
+/// The other way (rectified, no distortion: plumb_bob with zeros, R identity, P = [K | 0]), for generated bags.
+sensor_msgs::CameraInfo camera_info_from_camera(const diffdope::Camera& camera, const std_msgs::Header& header);
 
 /// Encoding and size checks alone (no pixel is touched): what the input callbacks do before handing a frame
 /// to the worker, which converts it. Same messages as the conversions below.

@@ -9,6 +9,7 @@
 #include <filesystem>
 #include <fstream>
 #include <nlohmann/json.hpp>
+#include <sstream>
 #include <string>
 #include <vector>
 
@@ -155,6 +156,14 @@ double parse_number_arg(const std::string& flag, const std::string& text) {
   if (used == 0 || used != text.size() || !std::isfinite(x))
     throw std::invalid_argument(flag + ": expected a number, got '" + text + "'");
   return x;
+}
+
+std::string read_text_file(const std::string& path, const std::string& what) {
+  std::ifstream in(path);
+  if (!in) throw std::runtime_error(path + ": cannot open " + what);
+  std::stringstream ss;
+  ss << in.rdbuf();
+  return ss.str();
 }
 
 void check_input_file(const std::string& path) {

@@ -1,5 +1,6 @@
 // Objects YAML (see include/diffdope/object_config.hpp).
 #include "diffdope/object_config.hpp"
+#include "diffdope/input_files.hpp"
 
 #include <yaml-cpp/yaml.h>
 
@@ -196,12 +197,8 @@ std::string instance_name(const ObjectConfig& object, int instance) {
 
 ObjectsConfig load_objects_config(const std::string& path, const PackageResolver& resolve_package,
                                   const RefinerOptions& base) {
-  std::ifstream in(path);
-  if (!in) throw std::runtime_error(path + ": cannot open the objects config");
-  std::stringstream ss;
-  ss << in.rdbuf();
   const std::string dir = std::filesystem::absolute(path).parent_path().string();
-  return parse_objects_config(ss.str(), path, dir, resolve_package, base);
+  return parse_objects_config(read_text_file(path, "the objects config"), path, dir, resolve_package, base);
 }
 
 Mesh load_object_mesh(const ObjectConfig& object) {

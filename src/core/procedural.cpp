@@ -89,6 +89,14 @@ Texture make_pattern_texture(int size, uint32_t seed) {
   return from_mat(img, "pattern" + std::to_string(seed));
 }
 
+Texture make_flat_texture(const Eigen::Vector3f& rgb, const std::string& source) {
+  Texture t;
+  t.width = t.height = 1;
+  t.rgb = {rgb.x(), rgb.y(), rgb.z()};
+  t.source = source;
+  return t;
+}
+
 Texture make_label_texture(int size, uint32_t seed) {
   std::mt19937 rng(seed);
   std::uniform_real_distribution<float> U(0.f, 1.f);

@@ -12,13 +12,7 @@
 namespace diffdope {
 namespace {
 
-Texture flat_texture(float grey) {
-  Texture t;
-  t.width = t.height = 1;
-  t.rgb = {grey, grey, 0.95f * grey};
-  t.source = "flat";
-  return t;
-}
+Texture grey(float g) { return make_flat_texture(Eigen::Vector3f(g, g, 0.95f * g)); }
 
 }  // namespace
 
@@ -34,12 +28,12 @@ GeneratedRobot write_generated_robot(const std::string& dir) {
     double z_centre;  // visual origin: the mesh centre on the link's z axis
   };
   std::vector<Part> parts;
-  parts.push_back({"base", make_box(Eigen::Vector3d(0.22, 0.18, 0.10), flat_texture(0.35f)), 0.05});
-  parts.push_back({"link1", make_cylinder(0.055, 0.12, 48, flat_texture(0.6f)), 0.06});
-  parts.push_back({"link2", make_box(Eigen::Vector3d(0.07, 0.06, 0.30), flat_texture(0.7f)), 0.15});
-  parts.push_back({"link3", make_box(Eigen::Vector3d(0.05, 0.05, 0.25), flat_texture(0.65f)), 0.125});
-  parts.push_back({"link4", make_cylinder(0.035, 0.08, 32, flat_texture(0.5f)), 0.04});
-  parts.push_back({"link5", make_box(Eigen::Vector3d(0.11, 0.04, 0.06), flat_texture(0.75f)), 0.03});
+  parts.push_back({"base", make_box(Eigen::Vector3d(0.22, 0.18, 0.10), grey(0.35f)), 0.05});
+  parts.push_back({"link1", make_cylinder(0.055, 0.12, 48, grey(0.6f)), 0.06});
+  parts.push_back({"link2", make_box(Eigen::Vector3d(0.07, 0.06, 0.30), grey(0.7f)), 0.15});
+  parts.push_back({"link3", make_box(Eigen::Vector3d(0.05, 0.05, 0.25), grey(0.65f)), 0.125});
+  parts.push_back({"link4", make_cylinder(0.035, 0.08, 32, grey(0.5f)), 0.04});
+  parts.push_back({"link5", make_box(Eigen::Vector3d(0.11, 0.04, 0.06), grey(0.75f)), 0.03});
   for (const Part& p : parts) save_ply(p.mesh, (fs::path(dir) / "meshes" / (p.name + ".ply")).string(), 1.0);
 
   // Joint offsets along the parent's z (the parent link's length), axes alternating about z and y.
@@ -88,6 +82,11 @@ std::map<std::string, double> random_configuration(const GeneratedRobot& robot, 
   q.at("joint2") = 0.6 * U(rng);
   q.at("joint3") = 0.4 + 0.6 * U(rng);
   return q;
+}
+
+GeneratedView generated_view() {
+  const Eigen::Vector3d centre(0, 0, 0.35);
+  return {Camera(600, 600, 319.5, 239.5, 640, 480), look_at(Eigen::Vector3d(1.2, -0.5, 0.7), centre), centre};
 }
 
 Pose look_at(const Eigen::Vector3d& eye, const Eigen::Vector3d& target) {

@@ -11,6 +11,7 @@
 #include <sstream>
 #include <stdexcept>
 
+#include "diffdope/input_files.hpp"
 #include "diffdope/procedural.hpp"
 
 namespace diffdope {
@@ -19,29 +20,15 @@ namespace {
 Pose to_pose(const urdf::Pose& p) {
   double x, y, z, w;
   p.rotation.getQuaternion(x, y, z, w);
-  return Pose(Eigen::Quaterniond(w, x, y, z).normalized().toRotationMatrix(),
-              Eigen::Vector3d(p.position.x, p.position.y, p.position.z));
-}
-
-/// A URDF primitive as a mesh in one flat colour (a 1x1 texture).
-Texture flat(const Eigen::Vector3f& rgb) {
-  Texture t;
-  t.width = t.height = 1;
-  t.rgb = {rgb.x(), rgb.y(), rgb.z()};
-  t.source = "URDF material colour";
-  return t;
+  return Pose::from_quaternion(x, y, z, w, Eigen::Vector3d(p.position.x, p.position.y, p.position.z));
 }
 
 }  // namespace
 
 RobotModel RobotModel::load_urdf(const std::string& path, const PackageResolver& resolve_package,
                                  const MeshLoadOptions& mesh_options) {
-  std::ifstream in(path);
-  if (!in) throw std::runtime_error(path + ": cannot open the URDF");
-  std::stringstream ss;
-  ss << in.rdbuf();
   const std::string dir = std::filesystem::absolute(path).parent_path().string();
-  return parse_urdf(ss.str(), dir, path, resolve_package, mesh_options);
+  return parse_urdf(read_text_file(path, "the URDF"), dir, path, resolve_package, mesh_options);
 }
 
 RobotModel RobotModel::parse_urdf(const std::string& xml, const std::string& base_dir, const std::string& origin,
@@ -92,7 +79,7 @@ RobotModel RobotModel::parse_urdf(const std::string& xml, const std::string& bas
           desc << "box " << size.transpose();
           key << desc.str();
           rv.source = desc.str();
-          make = [=] { return make_box(size, flat(colour)); };
+          make = [=] { return make_box(size, make_flat_texture(colour, "URDF material colour")); };
           break;
         }
         case urdf::Geometry::CYLINDER: {
@@ -100,7 +87,7 @@ RobotModel RobotModel::parse_urdf(const std::string& xml, const std::string& bas
           if (!(c.radius > 0) || !(c.length > 0)) throw std::runtime_error(where + ": cylinder size must be positive");
           key << "cylinder " << c.radius << " " << c.length;
           rv.source = "cylinder";
-          make = [=, r = c.radius, l = c.length] { return make_cylinder(r, l, 48, flat(colour)); };
+          make = [=, r = c.radius, l = c.length] { return make_cylinder(r, l, 48, make_flat_texture(colour, "URDF material colour")); };
           break;
         }
         case urdf::Geometry::SPHERE: {
@@ -108,7 +95,7 @@ RobotModel RobotModel::parse_urdf(const std::string& xml, const std::string& bas
           if (!(s.radius > 0)) throw std::runtime_error(where + ": sphere radius must be positive");
           key << "sphere " << s.radius;
           rv.source = "sphere";
-          make = [=, r = s.radius] { return make_uv_sphere(r, 16, 32, flat(colour)); };
+          make = [=, r = s.radius] { return make_uv_sphere(r, 16, 32, make_flat_texture(colour, "URDF material colour")); };
           break;
         }
         default:

@@ -39,6 +39,19 @@ cv::Mat share(const sensor_msgs::Image& image, const char* what) {
 
 }  // namespace
 
+sensor_msgs::CameraInfo camera_info_from_camera(const diffdope::Camera& cam, const std_msgs::Header& header) {
+  sensor_msgs::CameraInfo ci;
+  ci.header = header;
+  ci.width = uint32_t(cam.width);
+  ci.height = uint32_t(cam.height);
+  ci.distortion_model = "plumb_bob";
+  ci.D.assign(5, 0.0);
+  ci.K = {cam.fx, 0, cam.cx, 0, cam.fy, cam.cy, 0, 0, 1};
+  ci.R = {1, 0, 0, 0, 1, 0, 0, 0, 1};
+  ci.P = {cam.fx, 0, cam.cx, 0, 0, cam.fy, cam.cy, 0, 0, 0, 1, 0};
+  return ci;
+}
+
 diffdope::Camera camera_from_info(const sensor_msgs::CameraInfo& info, std::string* warning) {
   if (info.width == 0 || info.height == 0)
     throw std::invalid_argument("camera_info: width/height are zero (" + std::to_string(info.width) + "x" +

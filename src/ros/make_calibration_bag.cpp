@@ -24,6 +24,7 @@
 #include <random>
 
 #include "diffdope/input_files.hpp"
+#include "diffdope_ros/conversions.hpp"
 #include "diffdope/procedural.hpp"
 #include "diffdope/procedural_robot.hpp"
 #include "diffdope/robot_model.hpp"
@@ -72,12 +73,13 @@ int main(int argc, char** argv) {
     fs::create_directories(out);
     const GeneratedRobot robot = write_generated_robot((fs::path(out) / "robot").string());
     const RobotModel model = RobotModel::load_urdf(robot.urdf_path);
-    const Camera cam(600, 600, 319.5, 239.5, 640, 480);
-    const Pose truth = look_at(Eigen::Vector3d(1.2, -0.5, 0.7), Eigen::Vector3d(0, 0, 0.35));  // camera <- base
+    const GeneratedView view = generated_view();
+    const Camera& cam = view.camera;
+    const Pose& truth = view.camera_from_base;
     std::mt19937_64 rng{static_cast<uint64_t>(seed)};
     std::vector<std::map<std::string, double>> qs;
     for (int k = 0; k < configurations; ++k) qs.push_back(random_configuration(robot, rng));
-    const Pose guess = perturb_pose(truth, Eigen::Vector3d(0, 0, 0.35), 10 * M_PI / 180, 0.05, rng);
+    const Pose guess = perturb_pose(truth, view.centre, 10 * M_PI / 180, 0.05, rng);
     std::ofstream(fs::path(out) / "truth.yaml") << "truth: " << pose_list(truth.inverse()) << "\n";
     std::ofstream(fs::path(out) / "guess.yaml") << "initial_guess: " << pose_list(guess.inverse()) << "\n";
 
@@ -134,15 +136,7 @@ int main(int argc, char** argv) {
       bag.write("/camera/rgb/image_rect_color", h.stamp,
                 cv_bridge::CvImage(h, sensor_msgs::image_encodings::RGB8, rgb8).toImageMsg());
       bag.write("/camera/mask", h.stamp, cv_bridge::CvImage(h, sensor_msgs::image_encodings::MONO8, mask).toImageMsg());
-      sensor_msgs::CameraInfo ci;
-      ci.header = h;
-      ci.width = uint32_t(cam.width), ci.height = uint32_t(cam.height);
-      ci.distortion_model = "plumb_bob";
-      ci.D.assign(5, 0.0);
-      ci.K = {cam.fx, 0, cam.cx, 0, cam.fy, cam.cy, 0, 0, 1};
-      ci.R = {1, 0, 0, 0, 1, 0, 0, 0, 1};
-      ci.P = {cam.fx, 0, cam.cx, 0, 0, cam.fy, cam.cy, 0, 0, 0, 1, 0};
-      bag.write("/camera/depth/camera_info", h.stamp, ci);
+      bag.write("/camera/depth/camera_info", h.stamp, diffdope_ros::camera_info_from_camera(cam, h));
     }
     bag.close();
     std::fprintf(stderr, "diffdope_make_calibration_bag: %s: %d configurations, %.1f s\n", out.c_str(), configurations,

@@ -265,18 +265,6 @@ std_msgs::Header header(const ros::Time& stamp, const std::string& frame, uint32
   return h;
 }
 
-sensor_msgs::CameraInfo camera_info(const Camera& cam, const std_msgs::Header& h) {
-  sensor_msgs::CameraInfo ci;
-  ci.header = h;
-  ci.width = uint32_t(cam.width);
-  ci.height = uint32_t(cam.height);
-  ci.distortion_model = "plumb_bob";
-  ci.D.assign(5, 0.0);
-  ci.K = {cam.fx, 0, cam.cx, 0, cam.fy, cam.cy, 0, 0, 1};
-  ci.R = {1, 0, 0, 0, 1, 0, 0, 0, 1};
-  ci.P = {cam.fx, 0, cam.cx, 0, 0, cam.fy, cam.cy, 0, 0, 0, 1, 0};
-  return ci;
-}
 
 sensor_msgs::ImagePtr image_msg(const std_msgs::Header& h, const std::string& encoding, const cv::Mat& m) {
   return cv_bridge::CvImage(h, encoding, m).toImageMsg();
@@ -498,7 +486,7 @@ int main(int argc, char** argv) {
       cv::Mat rgb8;
       scene.rgb.convertTo(rgb8, CV_8UC3, 255.0);
       bag.write("/camera/rgb/image_rect_color", t, image_msg(h, sensor_msgs::image_encodings::RGB8, rgb8));
-      bag.write("/camera/rgb/camera_info", t, camera_info(cam, h));
+      bag.write("/camera/rgb/camera_info", t, diffdope_ros::camera_info_from_camera(cam, h));
       cv::Mat depth;
       if (depth16) {
         scene.depth.convertTo(depth, CV_16U, 1000.0);  // millimetres, rounded; 0 stays "no reading"

@@ -88,8 +88,9 @@ int generate(const std::string& dir, int count, uint64_t seed, double init_cm, d
   fs::create_directories(fs::path(dir) / "captures");
   const GeneratedRobot robot = write_generated_robot((fs::path(dir) / "robot").string());
   const RobotModel model = RobotModel::load_urdf(robot.urdf_path);
-  const Camera cam(600, 600, 319.5, 239.5, 640, 480);
-  const Pose truth = look_at(Eigen::Vector3d(1.2, -0.5, 0.7), Eigen::Vector3d(0, 0, 0.35));  // camera <- base
+  const GeneratedView view = generated_view();
+  const Camera& cam = view.camera;
+  const Pose& truth = view.camera_from_base;
   std::mt19937_64 rng(seed);
   const auto renderer = make_cpu_renderer();
   const Mesh occluder = make_box(Eigen::Vector3d(0.06, 0.06, 0.06), make_label_texture(64, 5));
@@ -99,7 +100,7 @@ int generate(const std::string& dir, int count, uint64_t seed, double init_cm, d
     std::vector<SceneObject> objects{{&posed, truth}};
     if (k % 3 == 1)  // every third capture has a box floating in front of the upper arm
       objects.push_back({&occluder, Pose(Eigen::Matrix3d::Identity(),
-                                         0.8 * (truth * Eigen::Vector3d(0, 0, 0.35)) + Eigen::Vector3d(0.04, 0, 0))});
+                                         0.8 * (truth * view.centre) + Eigen::Vector3d(0.04, 0, 0))});
     SyntheticNoise noise;
     noise.background_depth = 2.5;
     const SyntheticScene s = synthesize_scene(*renderer, cam, objects, noise, uint32_t(seed * 1000 + k));
@@ -122,7 +123,7 @@ int generate(const std::string& dir, int count, uint64_t seed, double init_cm, d
   write_text((fs::path(dir) / "camera.json").string(),
              json{{"fx", cam.fx}, {"fy", cam.fy}, {"cx", cam.cx}, {"cy", cam.cy}, {"width", cam.width},
                   {"height", cam.height}}.dump(2) + "\n");
-  const Pose guess = perturb_pose(truth, Eigen::Vector3d(0, 0, 0.35), init_deg * M_PI / 180, 0.01 * init_cm, rng);
+  const Pose guess = perturb_pose(truth, view.centre, init_deg * M_PI / 180, 0.01 * init_cm, rng);
   write_text((fs::path(dir) / "init.json").string(), pose_json(guess.inverse()).dump(2) + "\n");
   write_text((fs::path(dir) / "truth.json").string(), pose_json(truth.inverse()).dump(2) + "\n");
   std::printf("wrote %s: robot/robot.urdf, %d captures, camera.json, init.json (%.1f cm, %.1f deg off), truth.json\n",

@@ -638,3 +638,20 @@ TEST(Transports, UnknownOnesAreNamedWithWhatIsInstalled) {
   EXPECT_NE(e.find("(installed: raw, compressed)"), std::string::npos) << e;
   EXPECT_NE(diffdope_ros::unknown_transports({}, {{"image_transport", "raw"}}).find("installed: none"), std::string::npos);
 }
+
+TEST(Conversions, CameraInfoRoundTrip) {
+  const diffdope::Camera cam(600, 610, 319.5, 239.5, 640, 480);
+  std_msgs::Header h;
+  h.frame_id = "optical";
+  const sensor_msgs::CameraInfo ci = diffdope_ros::camera_info_from_camera(cam, h);
+  EXPECT_EQ(ci.header.frame_id, "optical");
+  std::string warning;
+  const diffdope::Camera back = diffdope_ros::camera_from_info(ci, &warning);
+  EXPECT_TRUE(warning.empty()) << warning;
+  EXPECT_DOUBLE_EQ(back.fx, 600);
+  EXPECT_DOUBLE_EQ(back.fy, 610);
+  EXPECT_DOUBLE_EQ(back.cx, 319.5);
+  EXPECT_DOUBLE_EQ(back.cy, 239.5);
+  EXPECT_EQ(back.width, 640);
+  EXPECT_EQ(back.height, 480);
+}

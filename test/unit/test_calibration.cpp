@@ -54,8 +54,9 @@ CalibrationCapture capture(const RobotModel& robot, const std::map<std::string, 
 struct ArmScene {
   GeneratedRobot generated;
   RobotModel robot;
-  Camera cam{600, 600, 319.5, 239.5, 640, 480};
-  Pose truth = look_at(Eigen::Vector3d(1.2, -0.5, 0.7), Eigen::Vector3d(0, 0, 0.35));
+  GeneratedView view = generated_view();
+  Camera cam = view.camera;
+  Pose truth = view.camera_from_base;
 };
 
 ArmScene& setup() {
