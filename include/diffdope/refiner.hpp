@@ -58,6 +58,11 @@ struct RefinerOptions {
   /// default: it settles ties on easy starts but misjudges hard ones, whose print is still a few pixels off
   /// when the scan comes (README figures).
   double explore_texture_weight = 0.0;  // [0, LossOptions::kMaxWeight]
+  /// Print alignment (print_alignment.hpp): after the descent, the result is turned about each axis of near
+  /// revolution of its shape (a bottle's axis: those explore_tolerance finds, declared symmetries excluded), the
+  /// turns silhouette and depth cannot tell apart, by up to +-print_search radians, and the turn where the print
+  /// agrees best with the image is kept. Radians; 0 = off (the paper's algorithm). Needs rgb.
+  double print_search = 0.7;  // [0, pi]
   LossOptions loss;             // term weights (all 1 as in the paper) and robustness constants
   uint64_t seed = 0;            // learning-rate draws; same seed, same inputs -> same result
   /// Stop when no run has improved its best loss by more than early_stop_tolerance (relative) for
@@ -121,6 +126,7 @@ struct RefineResult {
                                       // fine-phase best beat the start itself)
   int start = 0;                      // index of the initial pose the winning run started from
   int scan_turns = 0;                 // runs the shape scan (explore_tolerance) turned to another rotation
+  double print_turn = 0;              // radians the print alignment (print_search) turned the result by (0: none)
   int iterations = 0;                 // iterations actually run (early stop)
   double time_ms = 0;                 // wall time of refine() (refine_all(): from the call's start to this object's end)
   // Quality scores at the refined pose (at the refiner's image scale).
@@ -211,6 +217,10 @@ class Refiner {
  private:
   /// The model-frame turns the shape scan tries for `mesh` (none when not exploring).
   std::vector<Pose> shape_turns(const Mesh& mesh, bool explore);
+  /// The axes the print alignment turns `mesh` about (RefinerOptions::print_search; none when it is off).
+  std::vector<ShapeRotation> print_axes(const Mesh& mesh);
+  /// The shape analysis of `mesh`, computed once per mesh.
+  const std::vector<ShapeRotation>& shape_rotations(const Mesh& mesh);
   /// The refinement loop of one run (refine(), refine_views()); refine_all() steps several in lockstep.
   RefineResult drive(RefineRun& run);
 

@@ -5,6 +5,7 @@
 // gradient descent does not cross from one to the other (the texture's basin is narrow), so the refiner tries
 // them all on each run (RefinerOptions::explore_tolerance) and lets the loss decide.
 #include <Eigen/Core>
+#include <optional>
 #include <vector>
 
 #include "diffdope/pose.hpp"
@@ -38,5 +39,16 @@ constexpr int kMaxShapeTurns = 15;    // the refiner's scan: 11 turns about an a
 /// discrepancy (a box's half turns), best first. Empty when tolerance <= 0.
 std::vector<ShapeRotation> ambiguous_rotations(const std::vector<ShapeRotation>& candidates, double tolerance,
                                                int max_count);
+
+/// An axis of near revolution of most of the surface, found from its normals (every normal line of a surface
+/// of revolution meets the axis; fitted with the lines that miss it most left out, so a part that breaks the
+/// symmetry, a mug's handle, is outvoted): kept when three quarters of the surface stay within `tolerance`
+/// diameters of the surface after turns of 10, 20 and 40 degrees about it. A mug's body axis, which no
+/// principal axis need be (the handle tilts them). angle = 0, pivot on the axis.
+std::optional<ShapeRotation> fit_revolution_axis(const Mesh& mesh, double tolerance);
+
+/// The axes of near revolution among the candidates: those about which every multiple of 30 degrees is within
+/// `tolerance` (angle 0: the axis and its pivot). Empty when tolerance <= 0.
+std::vector<ShapeRotation> revolution_axes(const std::vector<ShapeRotation>& candidates, double tolerance);
 
 }  // namespace diffdope

@@ -5,6 +5,7 @@
 #include <mutex>
 
 #include "diffdope/device.hpp"
+#include "diffdope/print_alignment.hpp"
 #include "refine_run.hpp"
 
 #include <algorithm>
@@ -80,13 +81,16 @@ int halvings_due(int k, int iters) {
   return due;
 }
 
-/// Whether the loss or the shape scan compares texture gradients (observed_texture() is then needed).
-bool uses_texture(const RefinerOptions& o) {
-  return o.loss.weight_texture > 0 || (o.explore_tolerance > 0 && o.explore_texture_weight > 0);
+/// Whether the loss, the shape scan or the print alignment compares texture gradients at this scale
+/// (observed_texture() is then needed). The scan and the alignment run at the fine scale only.
+bool uses_texture(const RefinerOptions& o, bool fine) {
+  if (o.loss.weight_texture > 0) return true;
+  return fine && o.explore_tolerance > 0 && (o.explore_texture_weight > 0 || o.print_search > 0);
 }
 
 /// The frame's rgb / depth at `scale`, with the paper's edge map when the loss uses it.
-Observation scale_frame(const Camera& camera, const Observation& frame, const RefinerOptions& o, double scale) {
+Observation scale_frame(const Camera& camera, const Observation& frame, const RefinerOptions& o, double scale,
+                        bool fine) {
   Observation f;
   f.rgb = frame.rgb;
   f.depth = frame.depth;
@@ -94,7 +98,7 @@ Observation scale_frame(const Camera& camera, const Observation& frame, const Re
   f.validate(camera);
   if (scale != 1.0) f = f.resized(scaled_camera(camera, scale));
   if (o.loss.weight_edges > 0 && f.has_rgb() && !f.has_edges()) f.edges = observed_edges(f.rgb);
-  if (uses_texture(o) && f.has_rgb()) f.texture = observed_texture(f.rgb, o.loss.texture_epsilon);
+  if (uses_texture(o, fine) && f.has_rgb()) f.texture = observed_texture(f.rgb, o.loss.texture_epsilon);
   return f;
 }
 
@@ -119,6 +123,7 @@ RefineResult Refiner::refine(const Camera& camera, const Observation& observed, 
 RefineResult Refiner::refine(const Camera& camera, const Observation& observed, const Mesh& mesh,
                              const std::vector<Pose>& initials) {
   RefineRun run(options_, camera, observed, mesh, initials, shape_turns(mesh, true));
+  run.set_print_axes(print_axes(mesh));
   return drive(run);
 }
 
@@ -161,20 +166,38 @@ void RefineRun::evaluate(Renderer& renderer, const std::vector<Pose>& poses, con
     }
 }
 
-std::vector<Pose> Refiner::shape_turns(const Mesh& mesh, bool explore) {
-  if (!explore || !(options_.explore_tolerance > 0) || mesh.content_id() == 0) return {};
+const std::vector<ShapeRotation>& Refiner::shape_rotations(const Mesh& mesh) {
   auto cached = shape_rotations_.find(mesh.content_id());
   if (cached == shape_rotations_.end()) {
     if (shape_rotations_.size() >= 64) shape_rotations_.clear();  // a node that sees many meshes stays bounded
     cached = shape_rotations_.emplace(mesh.content_id(), analyse_shape_rotations(mesh)).first;
   }
+  return cached->second;
+}
+
+std::vector<Pose> Refiner::shape_turns(const Mesh& mesh, bool explore) {
+  if (!explore || !(options_.explore_tolerance > 0) || mesh.content_id() == 0) return {};
   std::vector<Pose> turns;
   // A declared symmetry's turns look the same by design: no loss can choose among them.
   const double radius = 0.5 * mesh.diameter(), angle_tol = 0.1;  // (30-degree steps: 0.1 rad tells them apart)
-  for (const ShapeRotation& r : ambiguous_rotations(cached->second, options_.explore_tolerance, kMaxShapeTurns))
+  for (const ShapeRotation& r : ambiguous_rotations(shape_rotations(mesh), options_.explore_tolerance, kMaxShapeTurns))
     if (!mesh.symmetry.contains(r.as_pose(), angle_tol, options_.explore_tolerance * mesh.diameter(), radius))
       turns.push_back(r.as_pose());
   return turns;
+}
+
+std::vector<ShapeRotation> Refiner::print_axes(const Mesh& mesh) {
+  if (!(options_.print_search > 0) || !(options_.explore_tolerance > 0) || mesh.content_id() == 0) return {};
+  std::vector<ShapeRotation> axes;
+  // About a declared continuous symmetry the print turns with the object: nothing to align.
+  const double radius = 0.5 * mesh.diameter(), angle_tol = 0.1;
+  for (ShapeRotation r : revolution_axes(shape_rotations(mesh), options_.explore_tolerance)) {
+    r.angle = M_PI / 6;
+    const bool declared = mesh.symmetry.contains(r.as_pose(), angle_tol, options_.explore_tolerance * mesh.diameter(), radius);
+    r.angle = 0;
+    if (!declared) axes.push_back(r);
+  }
+  return axes;
 }
 
 namespace {
@@ -239,7 +262,7 @@ RefineRun::RefineRun(const RefinerOptions& o, const std::vector<RefineView>& vie
   loss_ = o.loss;
   // The images at each scale: the frame's shared ones (refine_all) or resized here, this object's mask resized,
   // and without a mask a window around the initial projections (the mask term then has no observation).
-  const auto make_level = [&](const RefineView& view, double scale, const Observation* shared) {
+  const auto make_level = [&](const RefineView& view, double scale, const Observation* shared, bool fine) {
     const Observation& observed = view.observed;
     const Mesh& mesh = *view.mesh;
     Level l;
@@ -257,7 +280,7 @@ RefineRun::RefineRun(const RefinerOptions& o, const std::vector<RefineView>& vie
     }
     // The paper's edge term: Canny edges of the observed image, computed at this scale.
     if (loss_.weight_edges > 0 && l.obs.has_rgb() && !l.obs.has_edges()) l.obs.edges = observed_edges(l.obs.rgb);
-    if (uses_texture(o) && l.obs.has_rgb() && !l.obs.has_texture())
+    if (uses_texture(o, fine) && l.obs.has_rgb() && !l.obs.has_texture())
       l.obs.texture = observed_texture(l.obs.rgb, loss_.texture_epsilon);
     if (!l.obs.has_mask()) {
       l.obs.mask = window_mask(l.cam, mesh, initial, o.no_mask_window);
@@ -267,12 +290,12 @@ RefineRun::RefineRun(const RefinerOptions& o, const std::vector<RefineView>& vie
   };
   switch_at_ = coarse_iterations(o);
   for (const RefineView& view : views) {
-    fine_.push_back(make_level(view, o.image_scale, scaled_frame));
+    fine_.push_back(make_level(view, o.image_scale, scaled_frame, true));
     if (has_mask_ && cv::countNonZero(fine_.back().obs.mask > 0) == 0)
       throw std::invalid_argument(views.size() > 1 ? "refine: the object mask of view " +
                                                          std::to_string(fine_.size() - 1) + " is empty"
                                                    : "refine: the object mask is empty");
-    if (switch_at_ > 0) coarse_.push_back(make_level(view, o.image_scale * o.coarse_scale, coarse_frame));
+    if (switch_at_ > 0) coarse_.push_back(make_level(view, o.image_scale * o.coarse_scale, coarse_frame, false));
   }
   if (!has_mask_) loss_.weight_mask = 0;  // the window is not an observation of the silhouette
   pivot_model_ = pivot_model ? *pivot_model : meshes_.front()->center();
@@ -431,6 +454,23 @@ RefineResult RefineRun::finish(Renderer& renderer) {
   }
   const bool one_view = meshes_.size() == 1;
   const Mesh& mesh0 = *meshes_.front();
+  if (one_view && std::isfinite(res.loss.total) && fine_[0].obs.has_texture()) {
+    LossOptions with_print = loss_;
+    with_print.weight_texture = 1.0;
+    const PrintEvaluator evaluate_print = [&](const std::vector<Pose>& poses, std::vector<LossValue>& out) {
+      evaluate(renderer, poses, with_print, false, out, true);
+    };
+    for (const ShapeRotation& axis : print_axes_) {
+      const PrintAlignment a = align_print(res.pose, axis, o.print_search, loss_.weight_texture, evaluate_print);
+      res.pose = a.pose;
+      res.print_turn += a.angle;
+    }
+    if (res.print_turn != 0) {
+      std::vector<LossValue> v;
+      evaluate(renderer, {res.pose}, loss_, false, v, true);
+      res.loss = v[0];
+    }
+  }
   // Of the poses a declared symmetry makes equivalent, the one nearest the start: a track does not spin.
   if (one_view) res.pose = mesh0.symmetry.nearest_equivalent(res.pose, res.initial_pose.R);
   // Quality scores at the refined pose, per view; the result's are the weakest view's.
@@ -504,9 +544,9 @@ std::vector<RefineResult> Refiner::refine_all(const Camera& camera, const Observ
   // reported by each object's own check below.
   std::optional<Observation> shared_frame, coarse_frame;
   try {
-    shared_frame = scale_frame(camera, frame, options_, options_.image_scale);
+    shared_frame = scale_frame(camera, frame, options_, options_.image_scale, true);
     if (coarse_iterations(options_) > 0)
-      coarse_frame = scale_frame(camera, frame, options_, options_.image_scale * options_.coarse_scale);
+      coarse_frame = scale_frame(camera, frame, options_, options_.image_scale * options_.coarse_scale, false);
   } catch (const std::invalid_argument&) {
   }
   const auto fail = [&](size_t k, const std::string& why) {
@@ -529,6 +569,7 @@ std::vector<RefineResult> Refiner::refine_all(const Camera& camera, const Observ
       runs[k] = std::make_unique<RefineRun>(options_, camera, o, *t.mesh, initials, shape_turns(*t.mesh, t.explore),
                                             shared_frame ? &*shared_frame : nullptr,
                                             coarse_frame ? &*coarse_frame : nullptr);
+      runs[k]->set_print_axes(print_axes(*t.mesh));
     } catch (const std::exception& e) {
       fail(k, e.what());
     }
@@ -603,8 +644,10 @@ long planned_evaluations(const RefinerOptions& o) {
     total += active;
     if (k == scan_at && k < o.iterations) total += long(active) * (1 + kMaxShapeTurns);
   }
-  // finish(): the initial loss at the fine scale, the scoring render and the curvature probe.
-  return total + 2 + (o.probe_distance > 0 ? kCurvatureProbeEvaluations : 0);
+  // finish(): the initial loss at the fine scale, the scoring render, the print alignment (one axis, and the
+  // loss at its turn) and the curvature probe.
+  const long print = o.explore_tolerance > 0 ? print_alignment_evaluations(o.print_search) + 1 : 0;
+  return total + 2 + print + (o.probe_distance > 0 ? kCurvatureProbeEvaluations : 0);
 }
 
 }  // namespace diffdope

@@ -58,6 +58,7 @@ RefinerOptions parse(const YAML::Node& root, RefinerOptions o, const std::string
     read(root, "coarse_scale", o.coarse_scale, used);
     read(root, "explore_tolerance", o.explore_tolerance, used);
     read(root, "explore_texture_weight", o.explore_texture_weight, used);
+    read(root, "print_search", o.print_search, used);
     read(root, "seed", o.seed, used);
     read(root, "successive_halving", o.successive_halving, used);
     read(root, "early_stop_patience", o.early_stop_patience, used);
@@ -206,6 +207,7 @@ void RefinerOptions::validate() const {
   check("coarse_scale", coarse_scale, 0.05, 1);
   check("explore_tolerance", explore_tolerance, 0, 0.2);
   check("explore_texture_weight", explore_texture_weight, 0, LossOptions::kMaxWeight);
+  check("print_search", print_search, 0, M_PI);
   if (coarse_fraction > 0 && image_scale * coarse_scale < kMinImageScale) {
     std::ostringstream m;
     m << "image_scale * coarse_scale = " << image_scale * coarse_scale << " is below " << kMinImageScale;

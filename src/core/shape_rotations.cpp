@@ -5,7 +5,9 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <optional>
 #include <random>
+#include <Eigen/LU>
 
 #include "diffdope/mesh.hpp"
 
@@ -18,8 +20,10 @@ Pose ShapeRotation::as_pose() const {
 
 namespace {
 
-/// `n` points uniformly distributed over the surface (area-weighted triangles, uniform inside), seeded.
-std::vector<Eigen::Vector3f> sample_surface(const Mesh& mesh, int n, uint64_t seed) {
+/// `n` points uniformly distributed over the surface (area-weighted triangles, uniform inside), seeded;
+/// `normals` (optional) receives their triangles' unit normals.
+std::vector<Eigen::Vector3f> sample_surface(const Mesh& mesh, int n, uint64_t seed,
+                                            std::vector<Eigen::Vector3f>* normals = nullptr) {
   const int nt = mesh.num_triangles();
   std::vector<double> cumulative(static_cast<size_t>(nt));
   double total = 0;
@@ -43,8 +47,32 @@ std::vector<Eigen::Vector3f> sample_surface(const Mesh& mesh, int n, uint64_t se
     float u = float(U(rng)), v = float(U(rng));
     if (u + v > 1.f) u = 1.f - u, v = 1.f - v;
     out.push_back(corner(t, 0) + u * (corner(t, 1) - corner(t, 0)) + v * (corner(t, 2) - corner(t, 0)));
+    if (normals) normals->push_back((corner(t, 1) - corner(t, 0)).cross(corner(t, 2) - corner(t, 0)).normalized());
   }
   return out;
+}
+
+/// Distance from each of `moved` to the nearest point of `fixed` (as mean_nearest, every distance).
+std::vector<float> nearest_distances(const std::vector<Eigen::Vector3f>& moved, const std::vector<float>& fx,
+                                     const std::vector<float>& fy, const std::vector<float>& fz) {
+  std::vector<float> out;
+  out.reserve(moved.size());
+  for (const Eigen::Vector3f& p : moved) {
+    float best = std::numeric_limits<float>::infinity();
+    for (size_t j = 0; j < fx.size(); ++j) {
+      const float dx = fx[j] - p.x(), dy = fy[j] - p.y(), dz = fz[j] - p.z();
+      best = std::min(best, dx * dx + dy * dy + dz * dz);
+    }
+    out.push_back(std::sqrt(best));
+  }
+  return out;
+}
+
+float quantile(std::vector<float> v, double q) {
+  if (v.empty()) return 0.f;
+  const size_t k = std::min(v.size() - 1, size_t(q * double(v.size())));
+  std::nth_element(v.begin(), v.begin() + long(k), v.end());
+  return v[k];
 }
 
 /// Mean over `moved` of the distance to the nearest point of `fixed` (brute force on structure-of-arrays, which
@@ -113,16 +141,97 @@ std::vector<ShapeRotation> analyse_shape_rotations(const Mesh& mesh) {
   return out;
 }
 
+namespace {
+constexpr int kAnglesPerAxis = kShapeAngleSteps - 1;  // the candidates of one axis, consecutive
+/// Whether every multiple of 30 degrees about the axis of candidates c[0 .. kAnglesPerAxis) is within tolerance.
+bool is_revolution(const ShapeRotation* c, double tolerance) {
+  for (int k = 0; k < kAnglesPerAxis; ++k)
+    if (!(c[k].discrepancy <= tolerance)) return false;
+  return true;
+}
+}  // namespace
+
+std::vector<ShapeRotation> revolution_axes(const std::vector<ShapeRotation>& candidates, double tolerance) {
+  std::vector<ShapeRotation> out;
+  if (!(tolerance > 0)) return out;
+  for (size_t first = 0; first + kAnglesPerAxis <= candidates.size(); first += kAnglesPerAxis)
+    if (is_revolution(candidates.data() + first, tolerance)) {
+      ShapeRotation r = candidates[first];
+      r.angle = 0;
+      r.discrepancy = 0;
+      out.push_back(r);
+    }
+  return out;
+}
+
+std::optional<ShapeRotation> fit_revolution_axis(const Mesh& mesh, double tolerance) {
+  if (!(tolerance > 0) || !(mesh.diameter() > 0)) return std::nullopt;
+  constexpr int kSamples = 1024, kRounds = 12;
+  std::vector<Eigen::Vector3f> normals;
+  const std::vector<Eigen::Vector3f> a = sample_surface(mesh, kSamples, 3, &normals);
+  if (a.size() < 16) return std::nullopt;
+  // The normal line of sample i, in Pluecker coordinates (n, m = p x n), meets the axis (direction d, moment
+  // dbar = c x d) when n . dbar + m . d = 0: linear in (dbar, d). Least squares with |d| = 1, dbar eliminated
+  // (dbar = -Nnn^-1 Nnm d): d is the least eigenvector of the Schur complement. Re-weighted: samples whose
+  // normal line misses the axis by more than the median residual's kTrim times count no more (a handle).
+  const Eigen::Vector3d centre = mesh.center();  // (coordinates about the centre: better conditioned)
+  std::vector<Eigen::Vector3d> n(a.size()), m(a.size());
+  for (size_t i = 0; i < a.size(); ++i) {
+    n[i] = normals[i].cast<double>();
+    m[i] = (a[i].cast<double>() - centre).cross(n[i]);
+  }
+  std::vector<double> w(a.size(), 1.0);
+  Eigen::Vector3d d = Eigen::Vector3d::UnitZ(), dbar = Eigen::Vector3d::Zero();
+  for (int round = 0; round < kRounds; ++round) {
+    Eigen::Matrix3d Nnn = Eigen::Matrix3d::Zero(), Nnm = Eigen::Matrix3d::Zero(), Nmm = Eigen::Matrix3d::Zero();
+    for (size_t i = 0; i < a.size(); ++i) {
+      Nnn += w[i] * n[i] * n[i].transpose();
+      Nnm += w[i] * n[i] * m[i].transpose();
+      Nmm += w[i] * m[i] * m[i].transpose();
+    }
+    const Eigen::FullPivLU<Eigen::Matrix3d> lu(Nnn);
+    if (!lu.isInvertible()) return std::nullopt;  // normals in a plane or fewer directions (a flat piece)
+    const Eigen::Matrix3d schur = Nmm - Nnm.transpose() * lu.solve(Nnm);
+    const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(0.5 * (schur + schur.transpose()));
+    d = eig.eigenvectors().col(0).normalized();
+    dbar = -lu.solve(Nnm * d);
+    std::vector<double> r(a.size());
+    for (size_t i = 0; i < a.size(); ++i) r[i] = std::abs(n[i].dot(dbar) + m[i].dot(d));
+    std::vector<double> sorted = r;
+    std::nth_element(sorted.begin(), sorted.begin() + long(sorted.size() / 2), sorted.end());
+    const double cut = 3.0 * std::max(sorted[sorted.size() / 2], 1e-6 * mesh.diameter());
+    for (size_t i = 0; i < a.size(); ++i) w[i] = r[i] <= cut ? 1.0 : 0.0;
+  }
+  ShapeRotation axis;
+  axis.axis = d;
+  axis.pivot = centre + d.cross(dbar);  // the axis point nearest the centre (dbar = c x d)
+  // Kept when most of the surface (kRevolutionShare) maps onto itself after turns over the print search's
+  // range: the turned sample's distances to a second sample, against the samples' own distances.
+  const std::vector<Eigen::Vector3f> b = sample_surface(mesh, kSamples, 4);
+  std::vector<float> bx, by, bz;
+  for (const auto& p : b) bx.push_back(p.x()), by.push_back(p.y()), bz.push_back(p.z());
+  constexpr double kRevolutionShare = 0.75;
+  const float floor = quantile(nearest_distances(a, bx, by, bz), kRevolutionShare);
+  for (const double degrees : {10.0, 20.0, 40.0}) {
+    axis.angle = degrees * M_PI / 180.0;
+    const Pose T = axis.as_pose();
+    std::vector<Eigen::Vector3f> moved;
+    for (const auto& p : a) moved.push_back((T * p.cast<double>()).cast<float>());
+    const double q = quantile(nearest_distances(moved, bx, by, bz), kRevolutionShare);
+    if (!((q - floor) / mesh.diameter() <= tolerance)) return std::nullopt;
+  }
+  axis.angle = 0;
+  return axis;
+}
+
 std::vector<ShapeRotation> ambiguous_rotations(const std::vector<ShapeRotation>& candidates, double tolerance,
                                                int max_count) {
   std::vector<ShapeRotation> revolution, discrete;
   if (!(tolerance > 0) || max_count <= 0) return {};
-  constexpr int per_axis = kShapeAngleSteps - 1;
+  constexpr int per_axis = kAnglesPerAxis;
   for (size_t first = 0; first + per_axis <= candidates.size(); first += per_axis) {
     const ShapeRotation* c = candidates.data() + first;
-    bool all = true;
-    for (int k = 0; k < per_axis; ++k) all = all && c[k].discrepancy <= tolerance;
-    if (all) {  // a shape of revolution about this axis: spread the starts over the turn
+    if (is_revolution(c, tolerance)) {  // a shape of revolution about this axis: spread the starts over the turn
       const int n = std::min(kShapeAngleSteps, max_count + 1);
       for (int k = 1; k < n; ++k) {
         ShapeRotation r = c[0];

@@ -7,6 +7,7 @@
 #include "diffdope/device.hpp"
 #include "diffdope/metrics.hpp"
 #include "diffdope/procedural.hpp"
+#include "diffdope/print_alignment.hpp"
 #include "diffdope/refiner.hpp"
 #include "diffdope/synthetic.hpp"
 
@@ -136,7 +137,9 @@ TEST(Refiner, SuccessiveHalvingDropsTheWorseHalfThreeTimes) {
   // kMaxShapeTurns turns.
   RefinerOptions scan = o;
   scan.explore_tolerance = 0.01;
-  EXPECT_EQ(planned_evaluations(scan), planned_evaluations(o) + 4 * (1 + kMaxShapeTurns));
+  // (and the print alignment's, about one axis, and the loss at its turn)
+  EXPECT_EQ(planned_evaluations(scan),
+            planned_evaluations(o) + 4 * (1 + kMaxShapeTurns) + print_alignment_evaluations(scan.print_search) + 1);
 }
 
 TEST(Refiner, SeveralStartsTheBetterOneWins) {

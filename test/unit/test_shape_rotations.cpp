@@ -4,6 +4,7 @@
 #include <Eigen/Geometry>
 #include <cmath>
 
+#include "diffdope/print_alignment.hpp"
 #include "diffdope/procedural.hpp"
 #include "diffdope/refiner.hpp"
 #include "diffdope/renderer.hpp"
@@ -106,4 +107,76 @@ TEST(Refiner, ARollOnlyTheLabelShowsIsFoundByTheShapeScan) {
   EXPECT_GT(explored.scan_turns, 0);
   EXPECT_EQ(plain.scan_turns, 0);
   EXPECT_LT(explored.loss.total, plain.loss.total);
+}
+
+TEST(ShapeRotations, RevolutionAxesAreTheCylindersAxisAndNoneOfABox) {
+  const Mesh can = make_cylinder(0.035, 0.11, 64, make_label_texture(128, 3));
+  const auto axes = revolution_axes(analyse_shape_rotations(can), 0.01);
+  ASSERT_EQ(axes.size(), 1u);
+  EXPECT_NEAR(std::abs(axes[0].axis.z()), 1.0, 1e-6);
+  EXPECT_EQ(axes[0].angle, 0.0);
+  const Mesh box = make_box(Eigen::Vector3d(0.16, 0.06, 0.21), make_pattern_texture(64, 1));
+  EXPECT_TRUE(revolution_axes(analyse_shape_rotations(box), 0.01).empty());  // half turns only
+  EXPECT_TRUE(revolution_axes(analyse_shape_rotations(can), 0.0).empty());   // off
+}
+
+TEST(Refiner, ThePrintAlignmentTurnsAboutTheAxisToTheLabel) {
+  // The labelled can started 12 degrees off about its axis, refined on depth and mask only (as if its colour
+  // could not be trusted, as a flat render against a lit image): the descent cannot see the turn, the shape
+  // scan's 30-degree turns do not reach it, and only the print alignment's texture comparison brings it back.
+  const test::LabelledCan s = test::labelled_can();
+  const Pose start = s.truth * test::about_can_axis(12);
+  RefinerOptions o;
+  o.batch_size = 8;
+  o.iterations = 30;
+  o.image_scale = 1.0;
+  o.loss.weight_rgb = 0;
+  const RefineResult aligned = Refiner(o).refine(s.cam, s.obs, s.can, start);
+  o.print_search = 0;
+  const RefineResult plain = Refiner(o).refine(s.cam, s.obs, s.can, start);
+  EXPECT_LT(angle_between(aligned.pose.R, s.truth.R), 1.0);
+  EXPECT_GT(angle_between(plain.pose.R, s.truth.R), 8.0);
+  EXPECT_NEAR(degrees(std::abs(aligned.print_turn)), 12.0, 1.0);
+  EXPECT_EQ(plain.print_turn, 0.0);
+  EXPECT_LT((aligned.pose.t - s.truth.t).norm(), 0.002);
+}
+
+TEST(PrintAlignment, TakesTheTextureMinimumWithinRangeUnlessTheLossRises) {
+  ShapeRotation axis;
+  axis.axis = Eigen::Vector3d::UnitZ();
+  const Pose pose;
+  const double target = 0.2;  // radians: the print's turn
+  const auto turn_of = [&](const Pose& p) { return std::atan2(p.R(1, 0), p.R(0, 0)); };
+  double loss_rise = 0;  // relative rise of the other terms at the target
+  int calls = 0;
+  const PrintEvaluator eval = [&](const std::vector<Pose>& poses, std::vector<LossValue>& out) {
+    ++calls;
+    out.assign(poses.size(), LossValue());
+    for (size_t i = 0; i < poses.size(); ++i) {
+      const double a = turn_of(poses[i]);
+      out[i].texture = 0.5 + (a - target) * (a - target);
+      const double other = 1.0 + loss_rise * std::exp(-std::pow((a - target) / 0.05, 2));
+      out[i].total = other + out[i].texture;  // the texture at weight 1, the refiner's loss at weight 0
+    }
+  };
+  PrintAlignment a = align_print(pose, axis, 0.7, 0.0, eval);
+  EXPECT_EQ(calls, 2);  // the coarse steps, then the fine ones around the best
+  EXPECT_EQ(a.evaluations, print_alignment_evaluations(0.7));
+  EXPECT_NEAR(a.angle, target, kPrintFineStep / 2 + 1e-9);
+  EXPECT_NEAR(turn_of(a.pose), a.angle, 1e-9);
+  EXPECT_LT(a.print_after, a.print_before);
+  // Out of range: the best turn within it, at the boundary.
+  a = align_print(pose, axis, 0.1, 0.0, eval);
+  EXPECT_LE(std::abs(a.angle), 0.1 + kPrintCoarseStep);
+  EXPECT_GT(a.angle, 0.0);
+  // The other terms rising more than kPrintLossTolerance there: no turn.
+  loss_rise = 3 * kPrintLossTolerance;
+  a = align_print(pose, axis, 0.7, 0.0, eval);
+  EXPECT_EQ(a.angle, 0.0);
+  EXPECT_TRUE(a.pose.R.isApprox(pose.R));
+  // No range: nothing evaluated.
+  calls = 0;
+  EXPECT_EQ(align_print(pose, axis, 0.0, 0.0, eval).angle, 0.0);
+  EXPECT_EQ(calls, 0);
+  EXPECT_EQ(print_alignment_evaluations(0.0), 0);
 }
