@@ -1,8 +1,9 @@
 #pragma once
 // Print alignment (RefinerOptions::print_search): the last step of a refinement for shapes of near revolution.
-// About such an axis (a bottle's), silhouette and depth look the same after any turn, and the descent's L1 colour
-// term (a flat render against a lit image) barely sees the print, so the descent ends wherever the start's turn
-// left it: measured on dev_bop's bottle, a 10-degree start ends 1-8 degrees off, all of it about the axis. Here
+// About such an axis (a bottle's; a mug's body while its handle is out of sight), silhouette and depth look the
+// same after any turn, and the descent's L1 colour term (a flat render against a lit image) barely sees the
+// print, so the descent ends wherever the start's turn left it: measured on dev_bop's bottle and mug, 10-degree
+// starts end 1-8 degrees off, nearly all of it about the axis. Here
 // the result is turned about the axis over a range of angles and compared by the texture term (Sobel of log
 // grey: lighting's strength and colour leave it alone), whose minimum sits at the print's true turn once the
 // silhouette is in place.
@@ -19,10 +20,13 @@ namespace diffdope {
 /// the best (radians). 2.5 degrees move a 3 cm radius by 1.3 mm, under a pixel at working resolution.
 constexpr double kPrintCoarseStep = 2.5 * M_PI / 180.0;
 constexpr double kPrintFineStep = 0.5 * M_PI / 180.0;
-/// A turn is kept when the texture term is lower there by this fraction of its value at the result ...
+/// A turn is kept when the texture term is lower there by more than this fraction of its value at the result,
 constexpr double kPrintMargin = 0.01;
-/// ... and the refiner's own loss (silhouette, depth, colour) is at most this fraction higher.
+/// the refiner's own loss (silhouette, depth, colour) is at most this fraction higher,
 constexpr double kPrintLossTolerance = 0.02;
+/// and the texture term's relative gain is at least this many times the loss's relative rise (a print that
+/// barely registers better must not pay for it with the fit of everything else).
+constexpr double kPrintTradeoff = 2.0;
 
 struct PrintAlignment {
   Pose pose;                  // the result: the input pose turned by `angle` about the axis

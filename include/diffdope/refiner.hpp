@@ -5,6 +5,7 @@
 #include <cstdint>
 #include <functional>
 #include <map>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -59,9 +60,10 @@ struct RefinerOptions {
   /// when the scan comes (README figures).
   double explore_texture_weight = 0.0;  // [0, LossOptions::kMaxWeight]
   /// Print alignment (print_alignment.hpp): after the descent, the result is turned about each axis of near
-  /// revolution of its shape (a bottle's axis: those explore_tolerance finds, declared symmetries excluded), the
-  /// turns silhouette and depth cannot tell apart, by up to +-print_search radians, and the turn where the print
-  /// agrees best with the image is kept. Radians; 0 = off (the paper's algorithm). Needs rgb.
+  /// revolution of its shape (within explore_tolerance: a bottle's axis, or a mug's body axis, which the handle
+  /// hides from silhouette and depth whenever it is out of sight; declared symmetries excluded) by up to
+  /// +-print_search radians, and the turn where the print agrees best with the image is kept. Radians; 0 = off
+  /// (the paper's algorithm), as is explore_tolerance = 0. Needs rgb.
   double print_search = 0.7;  // [0, pi]
   LossOptions loss;             // term weights (all 1 as in the paper) and robustness constants
   uint64_t seed = 0;            // learning-rate draws; same seed, same inputs -> same result
@@ -227,6 +229,7 @@ class Refiner {
   RefinerOptions options_;
   std::unique_ptr<Renderer> renderer_;
   std::map<uint64_t, std::vector<ShapeRotation>> shape_rotations_;  // by Mesh::content_id(), analysed once
+  std::map<std::pair<uint64_t, double>, std::optional<ShapeRotation>> revolution_fits_;  // by (mesh, tolerance)
 };
 
 /// Hypothesis evaluations (one render + loss + gradient of one pose) that refining one object with `o` costs at

@@ -50,8 +50,10 @@ PrintAlignment align_print(const Pose& pose, const ShapeRotation& axis, double r
   out.print_before = out.print_after = at.texture;
   out.loss_before = out.loss_after = loss(at);
   const LossValue& b = values[best];
-  if (best != size_t(n) && std::isfinite(b.total) && b.texture < (1.0 - kPrintMargin) * at.texture &&
-      loss(b) <= (1.0 + kPrintLossTolerance) * loss(at)) {
+  const double gain = at.texture > 0 ? 1.0 - b.texture / at.texture : 0.0;
+  const double rise = loss(at) > 0 ? loss(b) / loss(at) - 1.0 : 0.0;
+  if (best != size_t(n) && std::isfinite(b.total) && gain > kPrintMargin && rise <= kPrintLossTolerance &&
+      gain >= kPrintTradeoff * rise) {
     out.pose = turned(angles[best]);
     out.angle = angles[best];
     out.print_after = b.texture;

@@ -191,7 +191,21 @@ std::vector<ShapeRotation> Refiner::print_axes(const Mesh& mesh) {
   std::vector<ShapeRotation> axes;
   // About a declared continuous symmetry the print turns with the object: nothing to align.
   const double radius = 0.5 * mesh.diameter(), angle_tol = 0.1;
-  for (ShapeRotation r : revolution_axes(shape_rotations(mesh), options_.explore_tolerance)) {
+  std::vector<ShapeRotation> candidates = revolution_axes(shape_rotations(mesh), options_.explore_tolerance);
+  // The axis of revolution of most of the surface (a mug's body: no principal axis when a handle tilts them),
+  // unless a principal one is already that axis.
+  const auto key = std::make_pair(mesh.content_id(), options_.explore_tolerance);
+  auto fitted = revolution_fits_.find(key);
+  if (fitted == revolution_fits_.end()) {
+    if (revolution_fits_.size() >= 64) revolution_fits_.clear();
+    fitted = revolution_fits_.emplace(key, fit_revolution_axis(mesh, options_.explore_tolerance)).first;
+  }
+  const double kSameAxis = std::cos(3.0 * M_PI / 180.0);
+  if (fitted->second && std::none_of(candidates.begin(), candidates.end(), [&](const ShapeRotation& c) {
+        return std::abs(c.axis.dot(fitted->second->axis)) > kSameAxis;
+      }))
+    candidates.push_back(*fitted->second);
+  for (ShapeRotation r : candidates) {
     r.angle = M_PI / 6;
     const bool declared = mesh.symmetry.contains(r.as_pose(), angle_tol, options_.explore_tolerance * mesh.diameter(), radius);
     r.angle = 0;

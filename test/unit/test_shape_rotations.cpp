@@ -148,13 +148,14 @@ TEST(PrintAlignment, TakesTheTextureMinimumWithinRangeUnlessTheLossRises) {
   const double target = 0.2;  // radians: the print's turn
   const auto turn_of = [&](const Pose& p) { return std::atan2(p.R(1, 0), p.R(0, 0)); };
   double loss_rise = 0;  // relative rise of the other terms at the target
+  double depth = 1.0;     // of the texture term's minimum
   int calls = 0;
   const PrintEvaluator eval = [&](const std::vector<Pose>& poses, std::vector<LossValue>& out) {
     ++calls;
     out.assign(poses.size(), LossValue());
     for (size_t i = 0; i < poses.size(); ++i) {
       const double a = turn_of(poses[i]);
-      out[i].texture = 0.5 + (a - target) * (a - target);
+      out[i].texture = 0.5 + depth * (a - target) * (a - target);
       const double other = 1.0 + loss_rise * std::exp(-std::pow((a - target) / 0.05, 2));
       out[i].total = other + out[i].texture;  // the texture at weight 1, the refiner's loss at weight 0
     }
@@ -174,9 +175,36 @@ TEST(PrintAlignment, TakesTheTextureMinimumWithinRangeUnlessTheLossRises) {
   a = align_print(pose, axis, 0.7, 0.0, eval);
   EXPECT_EQ(a.angle, 0.0);
   EXPECT_TRUE(a.pose.R.isApprox(pose.R));
+  // A rise within kPrintLossTolerance, but more than the print gains (2 % against 1.5 %): no turn either.
+  loss_rise = 0.75 * kPrintLossTolerance;
+  EXPECT_NEAR(align_print(pose, axis, 0.7, 0.0, eval).angle, target, kPrintFineStep);  // gains 7 %
+  depth = 0.25;
+  EXPECT_EQ(align_print(pose, axis, 0.7, 0.0, eval).angle, 0.0);
   // No range: nothing evaluated.
   calls = 0;
   EXPECT_EQ(align_print(pose, axis, 0.0, 0.0, eval).angle, 0.0);
   EXPECT_EQ(calls, 0);
   EXPECT_EQ(print_alignment_evaluations(0.0), 0);
+}
+
+TEST(ShapeRotations, TheFittedAxisOfRevolutionIsAMugsBodyAxisDespiteItsHandle) {
+  // The handle tilts the principal axes off the body's, so none is an axis of revolution; the normal lines of
+  // the body still meet its axis (the bounding box is centred, so the body's axis is x = offset, y = 0).
+  const Mesh mug = make_scan_like(ScanShape::Mug, Eigen::Vector3d(0.113, 0.084, 0.1), 3000, 256, 2);
+  EXPECT_TRUE(revolution_axes(analyse_shape_rotations(mug), 0.01).empty());
+  const auto fitted = fit_revolution_axis(mug, 0.01);
+  ASSERT_TRUE(fitted.has_value());
+  EXPECT_GT(std::abs(fitted->axis.z()), std::cos(2.0 * M_PI / 180));
+  EXPECT_NEAR(fitted->pivot.y(), 0.0, 0.002);
+  // A turn of the body about it keeps the body where it was: the axis runs through the body's centre, which
+  // lies towards -x of the box centre (the handle is on +x).
+  EXPECT_LT(fitted->pivot.x(), 0.0);
+  EXPECT_EQ(fitted->angle, 0.0);
+  // The cylinder's own axis; none for a box, an L-block or a switched-off tolerance.
+  const auto can = fit_revolution_axis(make_cylinder(0.035, 0.11, 64, make_label_texture(64, 3)), 0.01);
+  ASSERT_TRUE(can.has_value());
+  EXPECT_GT(std::abs(can->axis.z()), std::cos(1.0 * M_PI / 180));
+  EXPECT_FALSE(fit_revolution_axis(make_box(Eigen::Vector3d(0.16, 0.06, 0.21), make_pattern_texture(64, 1)), 0.01));
+  EXPECT_FALSE(fit_revolution_axis(make_l_block(0.12, make_label_texture(64, 2)), 0.01));
+  EXPECT_FALSE(fit_revolution_axis(mug, 0.0));
 }
