@@ -32,6 +32,7 @@ RefinerConfig to_config(const RuntimeSettings& s) {
   c.lr_high = o.lr_high;
   c.early_stop_patience = o.early_stop_patience;
   c.explore_tolerance = o.explore_tolerance;
+  c.print_search = o.print_search;
   c.weight_rgb = o.loss.weight_rgb;
   c.weight_depth = o.loss.weight_depth;
   c.weight_mask = o.loss.weight_mask;
@@ -60,6 +61,7 @@ RuntimeSettings from_config(const RefinerConfig& c, const RuntimeSettings& base)
   o.lr_high = c.lr_high;
   o.early_stop_patience = c.early_stop_patience;
   o.explore_tolerance = c.explore_tolerance;
+  o.print_search = c.print_search;
   o.loss.weight_rgb = c.weight_rgb;
   o.loss.weight_depth = c.weight_depth;
   o.loss.weight_mask = c.weight_mask;
