@@ -17,7 +17,8 @@
 namespace diffdope {
 
 /// Angles tried: every kPrintCoarseStep within the range, then every kPrintFineStep within one coarse step of
-/// the best (radians). 2.5 degrees move a 3 cm radius by 1.3 mm, under a pixel at working resolution.
+/// the best (radians; never beyond the range). 2.5 degrees move a 3 cm radius by 1.3 mm, under a pixel at
+/// working resolution. A range below kPrintCoarseStep searches nothing.
 constexpr double kPrintCoarseStep = 2.5 * M_PI / 180.0;
 constexpr double kPrintFineStep = 0.5 * M_PI / 180.0;
 /// A turn is kept when the texture term is lower there by more than this fraction of its value at the result,
@@ -40,12 +41,13 @@ struct PrintAlignment {
 using PrintEvaluator = std::function<void(const std::vector<Pose>& poses, std::vector<LossValue>& out)>;
 
 /// Turns `pose` about `axis` (model frame: ShapeRotation::axis through pivot; angle ignored) by up to +-range
-/// radians to where the texture term is lowest, kept under the conditions above. `texture_weight`: the
+/// radians: of the turns that meet the conditions above, the one where the texture term is lowest (none: no
+/// turn). `texture_weight`: the
 /// refiner's own weight of the texture term (its loss = evaluated total - (1 - texture_weight) * texture).
 PrintAlignment align_print(const Pose& pose, const ShapeRotation& axis, double range, double texture_weight,
                            const PrintEvaluator& evaluate);
 
-/// Model-frame evaluations align_print() makes for `range` (for time estimates).
+/// Evaluations align_print() makes for `range` at most (fewer when the best coarse turn is at the range's end).
 int print_alignment_evaluations(double range);
 
 }  // namespace diffdope

@@ -128,7 +128,9 @@ struct RefineResult {
                                       // fine-phase best beat the start itself)
   int start = 0;                      // index of the initial pose the winning run started from
   int scan_turns = 0;                 // runs the shape scan (explore_tolerance) turned to another rotation
-  double print_turn = 0;              // radians the print alignment (print_search) turned the result by (0: none)
+  double print_turn = 0;              // radians the print alignment (print_search) turned the result by (0: none);
+                                      // `loss` is then at the turned pose, up to kPrintLossTolerance (2 %)
+                                      // above the winning run's best (and so, rarely, above initial_loss)
   int iterations = 0;                 // iterations actually run (early stop)
   double time_ms = 0;                 // wall time of refine() (refine_all(): from the call's start to this object's end)
   // Quality scores at the refined pose (at the refiner's image scale).

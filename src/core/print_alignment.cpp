@@ -8,6 +8,19 @@ namespace diffdope {
 namespace {
 int coarse_steps(double range) { return std::max(0, int(std::floor(range / kPrintCoarseStep + 1e-9))); }
 constexpr int kFineSteps = int(kPrintCoarseStep / kPrintFineStep + 0.5) - 1;  // each side of the coarse best
+
+/// The refiner's loss from a value with the texture term at weight 1.
+double refiner_loss(const LossValue& v, double texture_weight) { return v.total - (1.0 - texture_weight) * v.texture; }
+
+/// Whether a turn to `to` may be kept over `at` (kPrintMargin, kPrintLossTolerance, kPrintTradeoff).
+bool acceptable(const LossValue& at, const LossValue& to, double texture_weight) {
+  const double f_at = refiner_loss(at, texture_weight), f_to = refiner_loss(to, texture_weight);
+  if (!std::isfinite(f_to) || !std::isfinite(to.texture) || !(at.texture > 0)) return false;
+  const double gain = 1.0 - to.texture / at.texture;
+  // (a loss of 0 at the result: no rise allowed)
+  const double rise = f_at > 0 ? f_to / f_at - 1.0 : (f_to > f_at ? HUGE_VAL : 0.0);
+  return gain > kPrintMargin && rise <= kPrintLossTolerance && gain >= kPrintTradeoff * rise;
+}
 }  // namespace
 
 int print_alignment_evaluations(double range) {
@@ -32,32 +45,33 @@ PrintAlignment align_print(const Pose& pose, const ShapeRotation& axis, double r
   };
   for (double a : angles) poses.push_back(turned(a));
   evaluate(poses, values);
-  size_t best = size_t(n);
-  for (size_t j = 0; j < values.size(); ++j)
-    if (values[j].texture < values[best].texture) best = j;
+  const LossValue at = values[size_t(n)];
+  out.print_before = out.print_after = at.texture;
+  out.loss_before = out.loss_after = refiner_loss(at, texture_weight);
+  // The best print among the turns that may be kept (none: the result itself, index n).
+  const auto best_of = [&](size_t first, size_t best) {
+    for (size_t j = first; j < values.size(); ++j)
+      if (acceptable(at, values[j], texture_weight) && (best == size_t(n) || values[j].texture < values[best].texture))
+        best = j;
+    return best;
+  };
+  size_t best = best_of(0, size_t(n));
   const double centre = angles[best];
   poses.clear();
   const size_t coarse_count = angles.size();
-  for (int m = -kFineSteps; m <= kFineSteps; ++m)
-    if (m != 0) angles.push_back(centre + m * kPrintFineStep), poses.push_back(turned(angles.back()));
-  evaluate(poses, more);
+  for (int m = -kFineSteps; m <= kFineSteps; ++m) {
+    const double a = centre + m * kPrintFineStep;
+    if (m != 0 && std::abs(a) <= range + 1e-12) angles.push_back(a), poses.push_back(turned(a));
+  }
+  if (!poses.empty()) evaluate(poses, more);
   values.insert(values.end(), more.begin(), more.end());
-  for (size_t j = coarse_count; j < values.size(); ++j)
-    if (values[j].texture < values[best].texture) best = j;
+  best = best_of(coarse_count, best);
   out.evaluations = int(values.size());
-  const auto loss = [&](const LossValue& v) { return v.total - (1.0 - texture_weight) * v.texture; };
-  const LossValue& at = values[size_t(n)];
-  out.print_before = out.print_after = at.texture;
-  out.loss_before = out.loss_after = loss(at);
-  const LossValue& b = values[best];
-  const double gain = at.texture > 0 ? 1.0 - b.texture / at.texture : 0.0;
-  const double rise = loss(at) > 0 ? loss(b) / loss(at) - 1.0 : 0.0;
-  if (best != size_t(n) && std::isfinite(b.total) && gain > kPrintMargin && rise <= kPrintLossTolerance &&
-      gain >= kPrintTradeoff * rise) {
+  if (best != size_t(n)) {
     out.pose = turned(angles[best]);
     out.angle = angles[best];
-    out.print_after = b.texture;
-    out.loss_after = loss(b);
+    out.print_after = values[best].texture;
+    out.loss_after = refiner_loss(values[best], texture_weight);
   }
   return out;
 }

@@ -8,6 +8,7 @@
 #include "diffdope/print_alignment.hpp"
 #include "refine_run.hpp"
 
+#include <Eigen/Geometry>
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -200,11 +201,20 @@ std::vector<ShapeRotation> Refiner::print_axes(const Mesh& mesh) {
     if (revolution_fits_.size() >= 64) revolution_fits_.clear();
     fitted = revolution_fits_.emplace(key, fit_revolution_axis(mesh, options_.explore_tolerance)).first;
   }
-  const double kSameAxis = std::cos(3.0 * M_PI / 180.0);
-  if (fitted->second && std::none_of(candidates.begin(), candidates.end(), [&](const ShapeRotation& c) {
-        return std::abs(c.axis.dot(fitted->second->axis)) > kSameAxis;
-      }))
-    candidates.push_back(*fitted->second);
+  // Several principal axes of revolution (a ball): every direction is one; the fit adds nothing.
+  if (fitted->second && candidates.size() < 2) {
+    const ShapeRotation& f = *fitted->second;
+    const double kSameDirection = std::cos(3.0 * M_PI / 180.0), kSameLine = 0.005 * mesh.diameter();
+    bool added = false;
+    for (ShapeRotation& c : candidates)
+      if (std::abs(c.axis.dot(f.axis)) > kSameDirection) {
+        // The same axis, unless the principal one runs beside it (its centroid pulled off by an appendage):
+        // then the fitted one, about which most of the surface turns into itself.
+        if ((f.pivot - c.pivot).cross(c.axis).norm() > kSameLine) c = f;
+        added = true;
+      }
+    if (!added) candidates.push_back(f);
+  }
   for (ShapeRotation r : candidates) {
     r.angle = M_PI / 6;
     const bool declared = mesh.symmetry.contains(r.as_pose(), angle_tol, options_.explore_tolerance * mesh.diameter(), radius);
@@ -474,15 +484,22 @@ RefineResult RefineRun::finish(Renderer& renderer) {
     const PrintEvaluator evaluate_print = [&](const std::vector<Pose>& poses, std::vector<LossValue>& out) {
       evaluate(renderer, poses, with_print, false, out, true);
     };
+    Pose aligned = res.pose;
+    bool turned = false;
     for (const ShapeRotation& axis : print_axes_) {
-      const PrintAlignment a = align_print(res.pose, axis, o.print_search, loss_.weight_texture, evaluate_print);
-      res.pose = a.pose;
-      res.print_turn += a.angle;
+      const PrintAlignment a = align_print(aligned, axis, o.print_search, loss_.weight_texture, evaluate_print);
+      aligned = a.pose;
+      turned = turned || a.angle != 0;
     }
-    if (res.print_turn != 0) {
+    if (turned) {
       std::vector<LossValue> v;
-      evaluate(renderer, {res.pose}, loss_, false, v, true);
-      res.loss = v[0];
+      evaluate(renderer, {aligned}, loss_, false, v, true);
+      // The turns of several axes together may cost no more than one may (kPrintLossTolerance).
+      if (v[0].total <= (1.0 + kPrintLossTolerance) * res.loss.total) {
+        res.print_turn = Eigen::AngleAxisd(res.pose.R.transpose() * aligned.R).angle();
+        res.pose = aligned;
+        res.loss = v[0];
+      }
     }
   }
   // Of the poses a declared symmetry makes equivalent, the one nearest the start: a track does not spin.

@@ -189,8 +189,11 @@ std::optional<ShapeRotation> fit_revolution_axis(const Mesh& mesh, double tolera
       Nnm += w[i] * n[i] * m[i].transpose();
       Nmm += w[i] * m[i] * m[i].transpose();
     }
+    // A small ridge: when every normal is across the axis (an open tube) dbar's part along d is free; the
+    // ridge takes it as 0, which is all the axis needs (d x dbar is the same).
+    Nnn += 1e-9 * std::max(Nnn.trace(), 1e-30) * Eigen::Matrix3d::Identity();
     const Eigen::FullPivLU<Eigen::Matrix3d> lu(Nnn);
-    if (!lu.isInvertible()) return std::nullopt;  // normals in a plane or fewer directions (a flat piece)
+    if (!lu.isInvertible()) return std::nullopt;  // no samples left
     const Eigen::Matrix3d schur = Nmm - Nnm.transpose() * lu.solve(Nnm);
     const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(0.5 * (schur + schur.transpose()));
     d = eig.eigenvectors().col(0).normalized();

@@ -139,6 +139,8 @@ TEST(Refiner, ThePrintAlignmentTurnsAboutTheAxisToTheLabel) {
   EXPECT_NEAR(degrees(std::abs(aligned.print_turn)), 12.0, 1.0);
   EXPECT_EQ(plain.print_turn, 0.0);
   EXPECT_LT((aligned.pose.t - s.truth.t).norm(), 0.002);
+  // The loss at the turned pose: within kPrintLossTolerance of the start's, which fits silhouette and depth as well.
+  EXPECT_LE(aligned.loss.total, (1 + kPrintLossTolerance) * aligned.initial_loss);
 }
 
 TEST(PrintAlignment, TakesTheTextureMinimumWithinRangeUnlessTheLossRises) {
@@ -147,7 +149,8 @@ TEST(PrintAlignment, TakesTheTextureMinimumWithinRangeUnlessTheLossRises) {
   const Pose pose;
   const double target = 0.2;  // radians: the print's turn
   const auto turn_of = [&](const Pose& p) { return std::atan2(p.R(1, 0), p.R(0, 0)); };
-  double loss_rise = 0;  // relative rise of the other terms at the target
+  double loss_rise = 0;  // relative rise of the other terms: near the target, or at every turn
+  bool rise_everywhere = false;
   double depth = 1.0;     // of the texture term's minimum
   int calls = 0;
   const PrintEvaluator eval = [&](const std::vector<Pose>& poses, std::vector<LossValue>& out) {
@@ -156,7 +159,8 @@ TEST(PrintAlignment, TakesTheTextureMinimumWithinRangeUnlessTheLossRises) {
     for (size_t i = 0; i < poses.size(); ++i) {
       const double a = turn_of(poses[i]);
       out[i].texture = 0.5 + depth * (a - target) * (a - target);
-      const double other = 1.0 + loss_rise * std::exp(-std::pow((a - target) / 0.05, 2));
+      const double near = std::exp(-std::pow((a - target) / 0.05, 2));
+      const double other = 1.0 + loss_rise * (rise_everywhere ? (a != 0.0 ? 1.0 : 0.0) : near);
       out[i].total = other + out[i].texture;  // the texture at weight 1, the refiner's loss at weight 0
     }
   };
@@ -166,12 +170,19 @@ TEST(PrintAlignment, TakesTheTextureMinimumWithinRangeUnlessTheLossRises) {
   EXPECT_NEAR(a.angle, target, kPrintFineStep / 2 + 1e-9);
   EXPECT_NEAR(turn_of(a.pose), a.angle, 1e-9);
   EXPECT_LT(a.print_after, a.print_before);
-  // Out of range: the best turn within it, at the boundary.
+  // Out of range: the best turn within it, at the boundary, never beyond.
   a = align_print(pose, axis, 0.1, 0.0, eval);
-  EXPECT_LE(std::abs(a.angle), 0.1 + kPrintCoarseStep);
-  EXPECT_GT(a.angle, 0.0);
-  // The other terms rising more than kPrintLossTolerance there: no turn.
+  EXPECT_LE(std::abs(a.angle), 0.1 + 1e-9);
+  EXPECT_GT(a.angle, 0.1 - kPrintFineStep);
+  // The other terms rising more than kPrintLossTolerance near the target: the best print among the turns that
+  // keep the fit, beside it.
   loss_rise = 3 * kPrintLossTolerance;
+  a = align_print(pose, axis, 0.7, 0.0, eval);
+  EXPECT_GT(std::abs(a.angle - target), 0.05);
+  EXPECT_LT(a.print_after, a.print_before);
+  EXPECT_LE(a.loss_after, (1 + kPrintLossTolerance) * a.loss_before + 1e-12);
+  // ... and at every turn: no turn.
+  rise_everywhere = true;
   a = align_print(pose, axis, 0.7, 0.0, eval);
   EXPECT_EQ(a.angle, 0.0);
   EXPECT_TRUE(a.pose.R.isApprox(pose.R));
