@@ -3,10 +3,9 @@
 // About such an axis (a bottle's; a mug's body while its handle is out of sight), silhouette and depth look the
 // same after any turn, and the descent's L1 colour term (a flat render against a lit image) barely sees the
 // print, so the descent ends wherever the start's turn left it: measured on dev_bop's bottle and mug, 10-degree
-// starts end 1-8 degrees off, nearly all of it about the axis. Here
-// the result is turned about the axis over a range of angles and compared by the texture term (Sobel of log
-// grey: lighting's strength and colour leave it alone), whose minimum sits at the print's true turn once the
-// silhouette is in place.
+// starts end 1-8 degrees off, nearly all of it about the axis. Here the result is turned about the axis over a
+// range of angles and compared by the texture term (Sobel of log grey: lighting's strength and colour leave it
+// alone), whose minimum sits at the print's true turn once the silhouette is in place.
 #include <functional>
 #include <vector>
 
@@ -42,8 +41,8 @@ using PrintEvaluator = std::function<void(const std::vector<Pose>& poses, std::v
 
 /// Turns `pose` about `axis` (model frame: ShapeRotation::axis through pivot; angle ignored) by up to +-range
 /// radians: of the turns that meet the conditions above, the one where the texture term is lowest (none: no
-/// turn). `texture_weight`: the
-/// refiner's own weight of the texture term (its loss = evaluated total - (1 - texture_weight) * texture).
+/// turn). `texture_weight`: the refiner's own weight of the texture term (its loss = evaluated total -
+/// (1 - texture_weight) * texture).
 PrintAlignment align_print(const Pose& pose, const ShapeRotation& axis, double range, double texture_weight,
                            const PrintEvaluator& evaluate);
 

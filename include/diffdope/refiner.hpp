@@ -223,6 +223,8 @@ class Refiner {
   std::vector<Pose> shape_turns(const Mesh& mesh, bool explore);
   /// The axes the print alignment turns `mesh` about (RefinerOptions::print_search; none when it is off).
   std::vector<ShapeRotation> print_axes(const Mesh& mesh);
+  /// Whether the model-frame `turn` is one of the mesh's declared symmetries.
+  bool is_declared_turn(const Mesh& mesh, const Pose& turn) const;
   /// The shape analysis of `mesh`, computed once per mesh.
   const std::vector<ShapeRotation>& shape_rotations(const Mesh& mesh);
   /// The refinement loop of one run (refine(), refine_views()); refine_all() steps several in lockstep.

@@ -176,22 +176,22 @@ const std::vector<ShapeRotation>& Refiner::shape_rotations(const Mesh& mesh) {
   return cached->second;
 }
 
+bool Refiner::is_declared_turn(const Mesh& mesh, const Pose& turn) const {
+  const double radius = 0.5 * mesh.diameter(), angle_tol = 0.1;  // (30-degree steps: 0.1 rad tells them apart)
+  return mesh.symmetry.contains(turn, angle_tol, options_.explore_tolerance * mesh.diameter(), radius);
+}
+
 std::vector<Pose> Refiner::shape_turns(const Mesh& mesh, bool explore) {
   if (!explore || !(options_.explore_tolerance > 0) || mesh.content_id() == 0) return {};
   std::vector<Pose> turns;
   // A declared symmetry's turns look the same by design: no loss can choose among them.
-  const double radius = 0.5 * mesh.diameter(), angle_tol = 0.1;  // (30-degree steps: 0.1 rad tells them apart)
   for (const ShapeRotation& r : ambiguous_rotations(shape_rotations(mesh), options_.explore_tolerance, kMaxShapeTurns))
-    if (!mesh.symmetry.contains(r.as_pose(), angle_tol, options_.explore_tolerance * mesh.diameter(), radius))
-      turns.push_back(r.as_pose());
+    if (!is_declared_turn(mesh, r.as_pose())) turns.push_back(r.as_pose());
   return turns;
 }
 
 std::vector<ShapeRotation> Refiner::print_axes(const Mesh& mesh) {
   if (!(options_.print_search > 0) || !(options_.explore_tolerance > 0) || mesh.content_id() == 0) return {};
-  std::vector<ShapeRotation> axes;
-  // About a declared continuous symmetry the print turns with the object: nothing to align.
-  const double radius = 0.5 * mesh.diameter(), angle_tol = 0.1;
   std::vector<ShapeRotation> candidates = revolution_axes(shape_rotations(mesh), options_.explore_tolerance);
   // The axis of revolution of most of the surface (a mug's body: no principal axis when a handle tilts them),
   // unless a principal one is already that axis.
@@ -215,11 +215,12 @@ std::vector<ShapeRotation> Refiner::print_axes(const Mesh& mesh) {
       }
     if (!added) candidates.push_back(f);
   }
-  for (ShapeRotation r : candidates) {
-    r.angle = M_PI / 6;
-    const bool declared = mesh.symmetry.contains(r.as_pose(), angle_tol, options_.explore_tolerance * mesh.diameter(), radius);
-    r.angle = 0;
-    if (!declared) axes.push_back(r);
+  // About a declared continuous symmetry the print turns with the object: nothing to align.
+  std::vector<ShapeRotation> axes;
+  for (const ShapeRotation& c : candidates) {
+    ShapeRotation turn = c;
+    turn.angle = M_PI / 6;
+    if (!is_declared_turn(mesh, turn.as_pose())) axes.push_back(c);
   }
   return axes;
 }

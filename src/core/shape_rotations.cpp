@@ -2,12 +2,12 @@
 
 #include <Eigen/Eigenvalues>
 #include <Eigen/Geometry>
+#include <Eigen/LU>
 #include <algorithm>
 #include <cmath>
 #include <limits>
 #include <optional>
 #include <random>
-#include <Eigen/LU>
 
 #include "diffdope/mesh.hpp"
 
@@ -52,10 +52,11 @@ std::vector<Eigen::Vector3f> sample_surface(const Mesh& mesh, int n, uint64_t se
   return out;
 }
 
-/// Distance from each of `moved` to the nearest point of `fixed` (as mean_nearest, every distance).
-std::vector<float> nearest_distances(const std::vector<Eigen::Vector3f>& moved, const std::vector<float>& fx,
-                                     const std::vector<float>& fy, const std::vector<float>& fz) {
-  std::vector<float> out;
+/// Distance from each of `moved` to the nearest point of `fixed` (brute force on structure-of-arrays, which the
+/// compiler vectorises: ~1k x 1k points in about a millisecond).
+std::vector<double> nearest_distances(const std::vector<Eigen::Vector3f>& moved, const std::vector<float>& fx,
+                                      const std::vector<float>& fy, const std::vector<float>& fz) {
+  std::vector<double> out;
   out.reserve(moved.size());
   for (const Eigen::Vector3f& p : moved) {
     float best = std::numeric_limits<float>::infinity();
@@ -63,32 +64,23 @@ std::vector<float> nearest_distances(const std::vector<Eigen::Vector3f>& moved, 
       const float dx = fx[j] - p.x(), dy = fy[j] - p.y(), dz = fz[j] - p.z();
       best = std::min(best, dx * dx + dy * dy + dz * dz);
     }
-    out.push_back(std::sqrt(best));
+    out.push_back(std::sqrt(double(best)));
   }
   return out;
 }
 
-float quantile(std::vector<float> v, double q) {
-  if (v.empty()) return 0.f;
+double quantile(std::vector<double> v, double q) {
+  if (v.empty()) return 0.0;
   const size_t k = std::min(v.size() - 1, size_t(q * double(v.size())));
   std::nth_element(v.begin(), v.begin() + long(k), v.end());
   return v[k];
 }
 
-/// Mean over `moved` of the distance to the nearest point of `fixed` (brute force on structure-of-arrays, which
-/// the compiler vectorises: ~1k x 1k points in about a millisecond).
+/// Mean over `moved` of the distance to the nearest point of `fixed`.
 double mean_nearest(const std::vector<Eigen::Vector3f>& moved, const std::vector<float>& fx,
                     const std::vector<float>& fy, const std::vector<float>& fz) {
   double sum = 0;
-  const size_t n = fx.size();
-  for (const Eigen::Vector3f& p : moved) {
-    float best = std::numeric_limits<float>::infinity();
-    for (size_t j = 0; j < n; ++j) {
-      const float dx = fx[j] - p.x(), dy = fy[j] - p.y(), dz = fz[j] - p.z();
-      best = std::min(best, dx * dx + dy * dy + dz * dz);
-    }
-    sum += std::sqrt(double(best));
-  }
+  for (double d : nearest_distances(moved, fx, fy, fz)) sum += d;
   return moved.empty() ? 0.0 : sum / double(moved.size());
 }
 
@@ -172,8 +164,8 @@ std::optional<ShapeRotation> fit_revolution_axis(const Mesh& mesh, double tolera
   if (a.size() < 16) return std::nullopt;
   // The normal line of sample i, in Pluecker coordinates (n, m = p x n), meets the axis (direction d, moment
   // dbar = c x d) when n . dbar + m . d = 0: linear in (dbar, d). Least squares with |d| = 1, dbar eliminated
-  // (dbar = -Nnn^-1 Nnm d): d is the least eigenvector of the Schur complement. Re-weighted: samples whose
-  // normal line misses the axis by more than the median residual's kTrim times count no more (a handle).
+  // (dbar = -Nnn^-1 Nnm d): d is the least eigenvector of the Schur complement. Refitted: samples whose
+  // residual exceeds 3 times the median's count no more (a handle's normal lines miss the body's axis).
   const Eigen::Vector3d centre = mesh.center();  // (coordinates about the centre: better conditioned)
   std::vector<Eigen::Vector3d> n(a.size()), m(a.size());
   for (size_t i = 0; i < a.size(); ++i) {
@@ -214,7 +206,7 @@ std::optional<ShapeRotation> fit_revolution_axis(const Mesh& mesh, double tolera
   std::vector<float> bx, by, bz;
   for (const auto& p : b) bx.push_back(p.x()), by.push_back(p.y()), bz.push_back(p.z());
   constexpr double kRevolutionShare = 0.75;
-  const float floor = quantile(nearest_distances(a, bx, by, bz), kRevolutionShare);
+  const double floor = quantile(nearest_distances(a, bx, by, bz), kRevolutionShare);
   for (const double degrees : {10.0, 20.0, 40.0}) {
     axis.angle = degrees * M_PI / 180.0;
     const Pose T = axis.as_pose();
