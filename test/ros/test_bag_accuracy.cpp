@@ -14,6 +14,7 @@
 #include <mutex>
 
 #include "diffdope/object_config.hpp"
+#include "diffdope/print_alignment.hpp"
 #include "diffdope_ros/conversions.hpp"
 #include "diffdope_ros/pose_checker.hpp"
 
@@ -218,7 +219,9 @@ TEST(BagAccuracy, RefinedPosesTfAndScores) {
       else EXPECT_EQ(p.depth_inliers, -1.0);
       EXPECT_GT(p.iterations, 0);
       EXPECT_GT(p.time_ms, 0.0);
-      EXPECT_LE(p.loss, p.initial_loss);  // the best pose seen: the start itself when already optimal
+      // The best pose seen (the start itself when already optimal), unless the print alignment then turned it:
+      // it may trade up to kPrintLossTolerance of loss for a clearly better print (RefineResult::print_turn).
+      EXPECT_LE(p.loss, (1 + diffdope::kPrintLossTolerance) * p.initial_loss);
       EXPECT_TRUE(p.source == "detector" || p.source == "track" || p.source == "prediction") << p.source;
       if (!p.plausible || looped) continue;
       const auto t = tf_buffer.lookupTransform(a.header.frame_id, "diffdope_" + p.name, a.header.stamp);
