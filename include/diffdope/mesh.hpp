@@ -103,7 +103,8 @@ class Mesh {
   const std::vector<int>& neighbors() const { return neighbors_; }
   /// Per triangle edge k: the vertex of the neighbour opposite that edge (valid where neighbors() >= 0).
   const std::vector<int>& opposite_vertices() const { return opposite_; }
-  /// Per triangle edge k: 1 where texture, UVs or colours are discontinuous across it (a colour seam).
+  /// Per triangle edge k: 1 where the colour jumps across it (a colour seam: texture, UVs or vertex colours
+  /// differ and so does the colour they give, e.g. a box crease; not a UV atlas's chart border).
   const std::vector<unsigned char>& seams() const { return seams_; }
 
   /// True when the surface is closed and consistently wound with outward normals (back faces then never show

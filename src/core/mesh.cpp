@@ -48,10 +48,17 @@ double compute_diameter(const std::vector<Vec3f>& pts) {
   return std::sqrt(best);
 }
 
+/// Largest colour difference (any channel, colours in [0, 1]) across a shared edge that is not a colour seam.
+/// The two sides of a baked UV atlas's chart border resample the same print and differ by a few percent at sharp
+/// print features; a crease between differently printed faces differs by far more. Blending a jump this small
+/// would keep the loss continuous to within 5 % of one pixel's colour, not worth its cost.
+constexpr float kSeamColourTolerance = 0.05f;
+
 /// Edge adjacency, colour seams and closedness of `triangles` (with their texture indices) over the mesh's vertices.
 void surface_topology(const std::vector<Vec3f>& positions, const std::vector<Vec2f>& uvs,
-                      const std::vector<Vec3f>& colors, const std::vector<int>& triangles,
-                      const std::vector<int>& tri_texture, double eps, std::vector<int>& neighbors_,
+                      const std::vector<Vec3f>& colors, const std::vector<Texture>& textures,
+                      const std::vector<int>& triangles, const std::vector<int>& tri_texture, double eps,
+                      std::vector<int>& neighbors_,
                       std::vector<int>& opposite_, std::vector<unsigned char>& seams_, bool& closed_outward_) {
   const int nt = static_cast<int>(triangles.size() / 3);
   // Weld by position: seams duplicate vertices (same position, different UVs) and must not become borders.
@@ -83,11 +90,22 @@ void surface_topology(const std::vector<Vec3f>& positions, const std::vector<Vec
   neighbors_.assign(3 * nt, -1);
   opposite_.assign(3 * nt, -1);
   seams_.assign(3 * nt, 0);
-  // Attributes jump across a shared edge when a shared (welded) corner carries different UVs or colours, or
+  // Attributes differ across a shared edge when a shared (welded) corner carries different UVs or colours, or
   // the two triangles use different textures.
   auto same_corner = [&](int i, int j) {
     if (!uvs.empty() && (uvs[i].x != uvs[j].x || uvs[i].y != uvs[j].y)) return false;
     return colors[i].x == colors[j].x && colors[i].y == colors[j].y && colors[i].z == colors[j].z;
+  };
+  // The colour triangle `tri` shows at fraction f of the way from its corner i to its corner j (vertex
+  // indices), as the renderer shades it (level 0 of its texture, else vertex colours).
+  auto colour_on_edge = [&](int tri, int i, int j, float f) {
+    const int tex = tri_texture[size_t(tri)];
+    if (tex >= 0 && size_t(tex) < textures.size() && !uvs.empty()) {
+      const Texture& T = textures[size_t(tex)];
+      const Vec2f uv{(1.f - f) * uvs[i].x + f * uvs[j].x, (1.f - f) * uvs[i].y + f * uvs[j].y};
+      return sample_bilinear(TextureLevelView{T.rgb.data(), T.width, T.height}, uv, nullptr, nullptr);
+    }
+    return (1.f - f) * colors[i] + f * colors[j];
   };
   auto corner_in = [&](int tri, int welded) {
     for (int c = 0; c < 3; ++c)
@@ -103,10 +121,16 @@ void surface_topology(const std::vector<Vec3f>& positions, const std::vector<Vec
     neighbors_[b] = ta;
     opposite_[a] = triangles[3 * tb + (b % 3 + 2) % 3];
     opposite_[b] = triangles[3 * ta + (a % 3 + 2) % 3];
-    bool seam = tri_texture[ta] != tri_texture[tb];
-    for (int c : {a % 3, (a % 3 + 1) % 3}) {
-      const int va = triangles[3 * ta + c];
-      seam |= !same_corner(va, corner_in(tb, weld[va]));
+    const int a0 = triangles[3 * ta + a % 3], a1 = triangles[3 * ta + (a % 3 + 1) % 3];
+    const int b0 = corner_in(tb, weld[a0]), b1 = corner_in(tb, weld[a1]);
+    bool seam = false;
+    if (tri_texture[ta] != tri_texture[tb] || !same_corner(a0, b0) || !same_corner(a1, b1)) {
+      // The attributes differ; a colour seam only where the colour itself jumps (a UV atlas's chart borders
+      // carry the same colour on both sides, and blending them would only cost time).
+      for (float f : {0.f, 0.25f, 0.5f, 0.75f, 1.f}) {
+        const Vec3f d = colour_on_edge(ta, a0, a1, f) - colour_on_edge(tb, b0, b1, f);
+        seam |= std::max({std::fabs(d.x), std::fabs(d.y), std::fabs(d.z)}) > kSeamColourTolerance;
+      }
     }
     seams_[a] = seams_[b] = seam ? 1 : 0;
   }
@@ -217,7 +241,7 @@ void Mesh::build_mipmaps() {
 }
 
 void Mesh::build_adjacency() {
-  surface_topology(positions, uvs, colors, triangles, tri_texture, weld_epsilon(bbox_min_, bbox_max_), neighbors_,
+  surface_topology(positions, uvs, colors, textures, triangles, tri_texture, weld_epsilon(bbox_min_, bbox_max_), neighbors_,
                    opposite_, seams_, closed_outward_);
 }
 
@@ -297,7 +321,7 @@ void Mesh::build_lods() {
       }
       v = index[size_t(v)];
     }
-    surface_topology(lod.positions, lod.uvs, lod.colors, lod.triangles, lod.tri_texture,
+    surface_topology(lod.positions, lod.uvs, lod.colors, textures, lod.triangles, lod.tri_texture,
                      weld_epsilon(bbox_min_, bbox_max_), lod.neighbors, lod.opposite, lod.seams, lod.closed_outward);
     lod.tri_uv_area = uv_areas(lod.uvs, lod.triangles);
     lods_.push_back(std::move(lod));

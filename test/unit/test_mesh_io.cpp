@@ -617,3 +617,51 @@ TEST_F(MeshIoTest, ErrorCorruptFile) {
   write_bytes("empty.obj", {});
   EXPECT_THROW(Mesh::load(file("empty.obj")), std::runtime_error);
 }
+
+namespace {
+/// A unit square of two triangles whose shared diagonal has its corners duplicated (a UV seam): the left
+/// triangle maps into texture column 0, the right one into column `right_column` of a 2x1 texture whose
+/// columns are `left` and `right` colours (sampled at texel centres, so bilinear filtering reads one texel).
+Mesh seam_square(const diffdope::Vec3f& left, const diffdope::Vec3f& right, int right_column) {
+  Mesh m;
+  m.positions = {{0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {0, 1, 0}, {0, 0, 0}, {1, 1, 0}};
+  // Vertices 4 and 5 duplicate 0 and 2 (the diagonal) for the right triangle 4-1-5; the left one is 0-2-3.
+  const float u0 = 0.25f, u1 = right_column == 0 ? 0.25f : 0.75f;
+  m.uvs = {{u0, 0.5f}, {u1, 0.5f}, {u0, 0.5f}, {u0, 0.5f}, {u1, 0.5f}, {u1, 0.5f}};
+  m.triangles = {4, 1, 5, 0, 2, 3};
+  m.colors.assign(m.positions.size(), {0.5f, 0.5f, 0.5f});
+  m.tri_texture = {0, 0};
+  diffdope::Texture t;
+  t.width = 2, t.height = 1;
+  t.rgb = {left.x, left.y, left.z, right.x, right.y, right.z};
+  m.textures.push_back(t);
+  m.finalize();
+  return m;
+}
+bool any_seam(const Mesh& m) {
+  for (unsigned char s : m.seams()) if (s) return true;
+  return false;
+}
+}  // namespace
+
+TEST(MeshSeams, AColourSeamIsWhereTheColourJumpsNotWhereOnlyTheUvsDo) {
+  const diffdope::Vec3f red{0.8f, 0.1f, 0.1f}, blue{0.1f, 0.1f, 0.8f}, almost_red{0.82f, 0.1f, 0.1f};
+  // The diagonal is shared (neighbours found across the duplicated corners) in every case.
+  const Mesh jump = seam_square(red, blue, 1);
+  ASSERT_EQ(jump.neighbors()[3 * 0 + 2], 1);
+  EXPECT_TRUE(any_seam(jump));                           // other UVs, other colour: a crease between prints
+  EXPECT_FALSE(any_seam(seam_square(red, red, 1)));       // other UVs, same colour: an atlas chart border
+  EXPECT_FALSE(any_seam(seam_square(red, almost_red, 1)));  // within the tolerance (resampling differences)
+  EXPECT_FALSE(any_seam(seam_square(red, blue, 0)));      // same UVs on both sides: no seam at all
+  // Vertex colours: a jump is a seam, equal colours on duplicated corners are not.
+  Mesh coloured = seam_square(red, red, 1);
+  coloured.tri_texture = {-1, -1};
+  coloured.textures.clear();
+  coloured.uvs.clear();
+  for (int i : {1, 4, 5}) coloured.colors[size_t(i)] = blue;
+  coloured.finalize();
+  EXPECT_TRUE(any_seam(coloured));
+  for (auto& c : coloured.colors) c = red;
+  coloured.finalize();
+  EXPECT_FALSE(any_seam(coloured));
+}
