@@ -25,7 +25,9 @@ namespace diffdope {
 /// but bound the time and memory one refinement can take.
 struct RefinerOptions {
   int batch_size = 32;   // B: parallel runs (paper: 32); [1, kMaxBatchSize]
-  int iterations = 100;  // gradient steps per run (paper: 100); [0, kMaxIterations]
+  /// Gradient steps per run (paper: 100). 60 with the coarse-to-fine schedule below ends within 0.2 AUC of 100 on
+  /// the dev set at 55 % of the time (README figures).
+  int iterations = 60;  // [0, kMaxIterations]
   /// Learning-rate bounds, dimensionless. A step moves the object's centre by about lr * 2 * diameter * (loss
   /// slope) and turns it by about 4 * lr * (slope) radians: translation gradients are scaled by diameter^2 and
   /// rotation gradients (taken about the object's centre) by 4, so one rate means the same for small and big
@@ -44,8 +46,8 @@ struct RefinerOptions {
   /// image_scale * coarse_scale (at 0.5, a quarter of the pixels), the rest at image_scale; the best pose of
   /// each run is then sought among the fine iterations only. coarse_fraction 0 = every iteration at image_scale
   /// (the paper's algorithm). The coarse phase is where the large moves of a hard start happen; the fine phase
-  /// polishes.
-  double coarse_fraction = 0.5;  // in [0, 1)
+  /// polishes. At 0.75 the fine phase is the last quarter, where successive halving has left B / 8 runs.
+  double coarse_fraction = 0.75;  // in [0, 1)
   double coarse_scale = 0.5;     // in [0.05, 1]; image_scale * coarse_scale >= kMinImageScale
   /// Hard starts on (nearly) symmetric shapes (shape_rotations.hpp): rotations about the surface's principal
   /// axes that move the surface by at most this fraction of its diameter (a bottle about its axis: every 30

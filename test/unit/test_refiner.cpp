@@ -73,6 +73,7 @@ TEST(Refiner, CoarseToFineEndsAtTheFineScale) {
   const Pose init = perturb_pose(s.truth, s.mesh.center(), 20 * M_PI / 180, 0.015, rng);
   RefinerOptions one = test_options(), c2f = test_options();
   one.coarse_fraction = 0;
+  c2f.coarse_fraction = 0.5;  // the halvings at 25 % and 50 % fall in the coarse phase, the one at 75 % in the fine
   ASSERT_GT(c2f.coarse_fraction, 0.0);
   const RefineResult a = Refiner(one).refine(s.cam, s.obs, s.mesh, init);
   const RefineResult b = Refiner(c2f).refine(s.cam, s.obs, s.mesh, init);
@@ -408,4 +409,33 @@ TEST(Metrics, AddAddsAndAuc) {
   EXPECT_NEAR(accuracy_auc({0.0, 0.0}, 0.05), 100.0, 1e-9);
   EXPECT_NEAR(accuracy_auc({0.025}, 0.05), 50.0, 1e-9);
   EXPECT_NEAR(accuracy_auc({0.1, 0.0}, 0.05), 50.0, 1e-9);
+}
+
+TEST(RefinerOptions, ShippedPresetsLoadAndDefaultYamlHoldsTheDefaults) {
+  const std::string dir = std::string(DIFFDOPE_SOURCE_DIR) + "/config/";
+  // default.yaml spells out the struct's defaults (read onto a base that differs in every field checked).
+  RefinerOptions other;
+  other.batch_size = 3, other.iterations = 7, other.coarse_fraction = 0.1, other.successive_halving = false;
+  other.explore_tolerance = 0.05, other.print_search = 0.1, other.render.lod_pixel_error = 2;
+  const RefinerOptions d = RefinerOptions::from_yaml_file(dir + "default.yaml", other), want;
+  EXPECT_EQ(d.batch_size, want.batch_size);
+  EXPECT_EQ(d.iterations, want.iterations);
+  EXPECT_EQ(d.coarse_fraction, want.coarse_fraction);
+  EXPECT_EQ(d.successive_halving, want.successive_halving);
+  EXPECT_EQ(d.explore_tolerance, want.explore_tolerance);
+  EXPECT_EQ(d.print_search, want.print_search);
+  EXPECT_EQ(d.render.lod_pixel_error, want.render.lod_pixel_error);
+  // paper.yaml is Algorithm 1 exactly: B = 32 runs of 100 steps at one scale, all to the end, nothing added.
+  const RefinerOptions p = RefinerOptions::from_yaml_file(dir + "paper.yaml");
+  p.validate();
+  EXPECT_EQ(p.batch_size, 32);
+  EXPECT_EQ(p.iterations, 100);
+  EXPECT_EQ(p.image_scale, 0.5);
+  EXPECT_EQ(p.coarse_fraction, 0.0);
+  EXPECT_FALSE(p.successive_halving);
+  EXPECT_EQ(p.early_stop_patience, 0);
+  EXPECT_EQ(p.explore_tolerance, 0.0);
+  EXPECT_EQ(p.print_search, 0.0);
+  EXPECT_EQ(p.render.lod_pixel_error, 0.0);
+  RefinerOptions::from_yaml_file(dir + "fast.yaml").validate();
 }
