@@ -67,6 +67,14 @@ struct RefinerOptions {
   /// +-print_search radians, and the turn where the print agrees best with the image is kept. Radians; 0 = off
   /// (the paper's algorithm), as is explore_tolerance = 0. Needs rgb.
   double print_search = 0.7;  // [0, pi]
+  /// Retry of a rejected result: when the verdict finds a refined pose implausible (RefineResult::plausible
+  /// false, no error), the object is refined again from its initial pose(s) and from each turned by
+  /// +-retry_turn about the surface's three principal axes (through its centroid; turns about a declared
+  /// symmetry left out), the B runs shared out among these starts, and the result with the lower loss is kept
+  /// (RefineResult::retried). A hard start that descent took into a wrong basin (a box seen edge-on) mostly has
+  /// a turned start in the right one. Costs a second refinement, for rejected results only; never for tracked
+  /// starts (ObjectTarget::explore false) or refine_views(). Radians; 0 = off (the paper's algorithm).
+  double retry_turn = 0.52;  // [0, pi]
   LossOptions loss;             // term weights (all 1 as in the paper) and robustness constants
   uint64_t seed = 0;            // learning-rate draws; same seed, same inputs -> same result
   /// Stop when no run has improved its best loss by more than early_stop_tolerance (relative) for
@@ -133,6 +141,9 @@ struct RefineResult {
   double print_turn = 0;              // radians the print alignment (print_search) turned the result by (0: none);
                                       // `loss` is then at the turned pose, up to kPrintLossTolerance (2 %)
                                       // above the winning run's best (and so, rarely, above initial_loss)
+  bool retried = false;               // the first result was rejected and refined again from turned starts
+                                      // (retry_turn): the fields are the better one's (initial_loss the
+                                      // caller's starts'), start may then index a turned start, time_ms is both
   int iterations = 0;                 // iterations actually run (early stop)
   double time_ms = 0;                 // wall time of refine() (refine_all(): from the call's start to this object's end)
   // Quality scores at the refined pose (at the refiner's image scale).
@@ -163,7 +174,7 @@ struct ObjectTarget {
   Pose initial;
   cv::Mat mask;  // this object's visible mask (CV_32FC1, or any type to_mask_float takes); may be empty
   std::vector<Pose> alternatives;  // further initial poses; the runs are shared out among all of them
-  bool explore = true;  // false: no shape scan (explore_tolerance), e.g. a tracked start to stay on
+  bool explore = true;  // false: no shape scan (explore_tolerance) nor retry (retry_turn), e.g. a tracked start
 };
 
 class RefineRun;  // (src/core/refine_run.hpp)
@@ -231,6 +242,15 @@ class Refiner {
   const std::vector<ShapeRotation>& shape_rotations(const Mesh& mesh);
   /// The refinement loop of one run (refine(), refine_views()); refine_all() steps several in lockstep.
   RefineResult drive(RefineRun& run);
+  /// One pass of refine() / refine_all(), without the retry.
+  RefineResult refine_once(const Camera& camera, const Observation& observed, const Mesh& mesh,
+                           const std::vector<Pose>& initials);
+  std::vector<RefineResult> refine_all_once(const Camera& camera, const Observation& frame,
+                                            const std::vector<ObjectTarget>& objects);
+  /// Whether `first` is rejected and due for a retry (RefinerOptions::retry_turn).
+  bool wants_retry(const RefineResult& first) const;
+  /// The retry's starts: `initials`, then each turned by +-retry_turn about the principal axes of `mesh`.
+  std::vector<Pose> retry_starts(const Mesh& mesh, const std::vector<Pose>& initials);
 
   RefinerOptions options_;
   std::unique_ptr<Renderer> renderer_;

@@ -59,6 +59,21 @@ namespace {
 
 Camera scaled_camera(const Camera& camera, double scale) { return scale == 1.0 ? camera : camera.scaled(scale); }
 
+double milliseconds_since(std::chrono::steady_clock::time_point start) {
+  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+}
+
+/// A rejected result and its retry's (RefinerOptions::retry_turn): the lower loss wins; initial_loss stays the
+/// caller's starts' and time_ms covers both refinements.
+RefineResult keep_better(RefineResult first, RefineResult retry, double time_ms) {
+  const double initial_loss = first.initial_loss;
+  RefineResult& kept = retry.error.empty() && retry.loss.total < first.loss.total ? retry : first;
+  kept.initial_loss = initial_loss;
+  kept.retried = true;
+  kept.time_ms = time_ms;
+  return std::move(kept);
+}
+
 /// Iterations run at the coarse scale (RefinerOptions::coarse_fraction).
 /// At least one fine step always follows (the last iteration only evaluates).
 int coarse_iterations(const RefinerOptions& o) {
@@ -123,9 +138,42 @@ RefineResult Refiner::refine(const Camera& camera, const Observation& observed, 
 
 RefineResult Refiner::refine(const Camera& camera, const Observation& observed, const Mesh& mesh,
                              const std::vector<Pose>& initials) {
+  const auto start = std::chrono::steady_clock::now();
+  RefineResult first = refine_once(camera, observed, mesh, initials);
+  if (!wants_retry(first)) return first;
+  return keep_better(std::move(first), refine_once(camera, observed, mesh, retry_starts(mesh, initials)),
+                     milliseconds_since(start));
+}
+
+RefineResult Refiner::refine_once(const Camera& camera, const Observation& observed, const Mesh& mesh,
+                                  const std::vector<Pose>& initials) {
   RefineRun run(options_, camera, observed, mesh, initials, shape_turns(mesh, true));
   run.set_print_axes(print_axes(mesh));
   return drive(run);
+}
+
+bool Refiner::wants_retry(const RefineResult& first) const {
+  return options_.retry_turn > 0 && first.error.empty() && !first.plausible;
+}
+
+std::vector<Pose> Refiner::retry_starts(const Mesh& mesh, const std::vector<Pose>& initials) {
+  // The principal axes (through the centroid) the shape analysis turned about, each once.
+  std::vector<ShapeRotation> axes;
+  for (const ShapeRotation& c : shape_rotations(mesh)) {
+    bool seen = false;
+    for (const ShapeRotation& a : axes) seen = seen || std::abs(a.axis.dot(c.axis)) > 0.999;
+    if (!seen) axes.push_back(ShapeRotation{c.axis, c.pivot, 0.0, 0.0});
+  }
+  std::vector<Pose> turns;
+  for (ShapeRotation a : axes)
+    for (const double angle : {options_.retry_turn, 2 * M_PI - options_.retry_turn}) {
+      a.angle = angle;
+      if (!is_declared_turn(mesh, a.as_pose())) turns.push_back(a.as_pose());
+    }
+  std::vector<Pose> starts = initials;
+  for (const Pose& initial : initials)
+    for (const Pose& turn : turns) starts.push_back(initial * turn);
+  return starts;
 }
 
 RefineResult Refiner::refine_views(const std::vector<RefineView>& views, const std::vector<Pose>& initials,
@@ -570,6 +618,30 @@ RefineResult RefineRun::finish(Renderer& renderer) {
 
 std::vector<RefineResult> Refiner::refine_all(const Camera& camera, const Observation& frame,
                                               const std::vector<ObjectTarget>& objects) {
+  const auto start = std::chrono::steady_clock::now();
+  std::vector<RefineResult> out = refine_all_once(camera, frame, objects);
+  // The rejected objects (not tracked starts) again, in lockstep among themselves, from turned starts.
+  std::vector<ObjectTarget> again;
+  std::vector<size_t> which;
+  for (size_t k = 0; k < objects.size(); ++k) {
+    if (!objects[k].explore || !objects[k].mesh || !wants_retry(out[k])) continue;
+    ObjectTarget t = objects[k];
+    std::vector<Pose> initials{t.initial};
+    initials.insert(initials.end(), t.alternatives.begin(), t.alternatives.end());
+    const std::vector<Pose> starts = retry_starts(*t.mesh, initials);
+    t.alternatives.assign(starts.begin() + 1, starts.end());
+    again.push_back(std::move(t));
+    which.push_back(k);
+  }
+  if (again.empty()) return out;
+  std::vector<RefineResult> retried = refine_all_once(camera, frame, again);
+  const double ms = milliseconds_since(start);
+  for (size_t j = 0; j < which.size(); ++j) out[which[j]] = keep_better(std::move(out[which[j]]), std::move(retried[j]), ms);
+  return out;
+}
+
+std::vector<RefineResult> Refiner::refine_all_once(const Camera& camera, const Observation& frame,
+                                                   const std::vector<ObjectTarget>& objects) {
   std::vector<RefineResult> out(objects.size());
   std::vector<std::unique_ptr<RefineRun>> runs(objects.size());
   // The frame is resized (and its edges found) once for all objects. A frame that does not fit the camera is

@@ -59,6 +59,7 @@ RefinerOptions parse(const YAML::Node& root, RefinerOptions o, const std::string
     read(root, "explore_tolerance", o.explore_tolerance, used);
     read(root, "explore_texture_weight", o.explore_texture_weight, used);
     read(root, "print_search", o.print_search, used);
+    read(root, "retry_turn", o.retry_turn, used);
     read(root, "seed", o.seed, used);
     read(root, "successive_halving", o.successive_halving, used);
     read(root, "early_stop_patience", o.early_stop_patience, used);
@@ -208,6 +209,7 @@ void RefinerOptions::validate() const {
   check("explore_tolerance", explore_tolerance, 0, 0.2);
   check("explore_texture_weight", explore_texture_weight, 0, LossOptions::kMaxWeight);
   check("print_search", print_search, 0, M_PI);
+  check("retry_turn", retry_turn, 0, M_PI);
   if (coarse_fraction > 0 && image_scale * coarse_scale < kMinImageScale) {
     std::ostringstream m;
     m << "image_scale * coarse_scale = " << image_scale * coarse_scale << " is below " << kMinImageScale;

@@ -33,6 +33,7 @@ RefinerConfig to_config(const RuntimeSettings& s) {
   c.early_stop_patience = o.early_stop_patience;
   c.explore_tolerance = o.explore_tolerance;
   c.print_search = o.print_search;
+  c.retry_turn = o.retry_turn;
   c.weight_rgb = o.loss.weight_rgb;
   c.weight_depth = o.loss.weight_depth;
   c.weight_mask = o.loss.weight_mask;
@@ -62,6 +63,7 @@ RuntimeSettings from_config(const RefinerConfig& c, const RuntimeSettings& base)
   o.early_stop_patience = c.early_stop_patience;
   o.explore_tolerance = c.explore_tolerance;
   o.print_search = c.print_search;
+  o.retry_turn = c.retry_turn;
   o.loss.weight_rgb = c.weight_rgb;
   o.loss.weight_depth = c.weight_depth;
   o.loss.weight_mask = c.weight_mask;

@@ -215,6 +215,7 @@ int main(int argc, char** argv) {
           line["loss_terms"] = {{"rgb", r.loss.rgb}, {"depth", r.loss.depth}, {"mask", r.loss.mask}};
           line["scan_turns"] = r.scan_turns;
           line["print_turn_deg"] = r.print_turn * 180.0 / M_PI;
+          line["retried"] = r.retried;
           line["print"] = {{"ncc", r.print.ncc}, {"best_ncc", r.print.best_ncc}, {"best_dx", r.print.best_dx},
                            {"best_dy", r.print.best_dy}, {"far_mean", r.print.far_mean}, {"far_std", r.print.far_std},
                            {"pixels", r.print.pixels}, {"render_contrast", r.print.render_contrast}};

@@ -225,6 +225,7 @@ nlohmann::ordered_json pose_json(const RefineResult& r) {
               {"depth_inliers", r.depth_inliers},
               {"converged", r.converged},
               {"plausible", r.plausible},
+              {"retried", r.retried},
               {"confidence", r.confidence},
               {"print_significance", std::isfinite(r.print.significance()) ? nlohmann::json(r.print.significance())
                                                                            : nlohmann::json(nullptr)},

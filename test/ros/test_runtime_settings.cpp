@@ -21,6 +21,7 @@ RuntimeSettings someSettings() {
   s.refiner.early_stop_patience = 5;
   s.refiner.explore_tolerance = 0.03;
   s.refiner.print_search = 0.3;
+  s.refiner.retry_turn = 0.4;
   s.refiner.loss.weight_rgb = 0.7;
   s.refiner.loss.weight_depth = 2.0;
   s.refiner.loss.weight_mask = 0.3;
@@ -54,6 +55,7 @@ TEST(RuntimeSettings, RoundTripKeepsEveryValue) {
   EXPECT_EQ(back.refiner.early_stop_patience, 5);
   EXPECT_DOUBLE_EQ(back.refiner.explore_tolerance, 0.03);
   EXPECT_DOUBLE_EQ(back.refiner.print_search, 0.3);
+  EXPECT_DOUBLE_EQ(back.refiner.retry_turn, 0.4);
   EXPECT_DOUBLE_EQ(back.refiner.loss.weight_rgb, 0.7);
   EXPECT_DOUBLE_EQ(back.refiner.loss.weight_depth, 2.0);
   EXPECT_DOUBLE_EQ(back.refiner.loss.weight_mask, 0.3);

@@ -416,7 +416,7 @@ TEST(RefinerOptions, ShippedPresetsLoadAndDefaultYamlHoldsTheDefaults) {
   // default.yaml spells out the struct's defaults (read onto a base that differs in every field checked).
   RefinerOptions other;
   other.batch_size = 3, other.iterations = 7, other.coarse_fraction = 0.1, other.successive_halving = false;
-  other.explore_tolerance = 0.05, other.print_search = 0.1, other.render.lod_pixel_error = 2;
+  other.explore_tolerance = 0.05, other.print_search = 0.1, other.render.lod_pixel_error = 2, other.retry_turn = 1;
   const RefinerOptions d = RefinerOptions::from_yaml_file(dir + "default.yaml", other), want;
   EXPECT_EQ(d.batch_size, want.batch_size);
   EXPECT_EQ(d.iterations, want.iterations);
@@ -424,6 +424,7 @@ TEST(RefinerOptions, ShippedPresetsLoadAndDefaultYamlHoldsTheDefaults) {
   EXPECT_EQ(d.successive_halving, want.successive_halving);
   EXPECT_EQ(d.explore_tolerance, want.explore_tolerance);
   EXPECT_EQ(d.print_search, want.print_search);
+  EXPECT_EQ(d.retry_turn, want.retry_turn);
   EXPECT_EQ(d.render.lod_pixel_error, want.render.lod_pixel_error);
   // paper.yaml is Algorithm 1 exactly: B = 32 runs of 100 steps at one scale, all to the end, nothing added.
   const RefinerOptions p = RefinerOptions::from_yaml_file(dir + "paper.yaml");
@@ -436,6 +437,47 @@ TEST(RefinerOptions, ShippedPresetsLoadAndDefaultYamlHoldsTheDefaults) {
   EXPECT_EQ(p.early_stop_patience, 0);
   EXPECT_EQ(p.explore_tolerance, 0.0);
   EXPECT_EQ(p.print_search, 0.0);
+  EXPECT_EQ(p.retry_turn, 0.0);
   EXPECT_EQ(p.render.lod_pixel_error, 0.0);
   RefinerOptions::from_yaml_file(dir + "fast.yaml").validate();
+}
+
+TEST(Refiner, ARejectedResultIsRefinedAgainFromTurnedStarts) {
+  // The L-block 70 degrees off: the descent ends in a wrong basin that the verdict rejects; among the starts
+  // turned by +-retry_turn about the principal axes one lies in the right basin, and its result wins on loss.
+  const Scene s = make_scene(1);
+  RefinerOptions plain = test_options();
+  plain.retry_turn = 0;
+  Refiner once(plain), retrying(test_options());
+  for (const uint64_t seed : {1, 3}) {
+    SCOPED_TRACE(seed);
+    std::mt19937_64 rng(seed);
+    const Pose init = perturb_pose(s.truth, s.mesh.center(), 70 * M_PI / 180, 0.02, rng);
+    const RefineResult a = once.refine(s.cam, s.obs, s.mesh, init);
+    const RefineResult b = retrying.refine(s.cam, s.obs, s.mesh, init);
+    EXPECT_GT(add_mm(s, a.pose), 20.0);
+    EXPECT_FALSE(a.plausible);
+    EXPECT_FALSE(a.retried);
+    EXPECT_TRUE(b.retried);
+    EXPECT_TRUE(b.plausible);
+    EXPECT_LT(add_mm(s, b.pose), 5.0);
+    EXPECT_LT(b.loss.total, a.loss.total);
+    EXPECT_EQ(b.initial_loss, a.initial_loss);  // the caller's start, not a turned one
+    EXPECT_GT(b.start, 0);                      // the winner came from a turned start
+    // refine_all retries the same way, unless the start is a tracked one (no exploring).
+    ObjectTarget t{&s.mesh, init, s.obs.mask, {}, true};
+    const RefineResult c = retrying.refine_all(s.cam, s.obs, {t})[0];
+    EXPECT_TRUE(c.retried);
+    EXPECT_LT(add_mm(s, c.pose), 5.0);
+    t.explore = false;
+    EXPECT_FALSE(retrying.refine_all(s.cam, s.obs, {t})[0].retried);
+  }
+  // An accepted result is not refined again: the same as without retries.
+  std::mt19937_64 rng(2);
+  const Pose init = perturb_pose(s.truth, s.mesh.center(), 70 * M_PI / 180, 0.02, rng);
+  const RefineResult a = once.refine(s.cam, s.obs, s.mesh, init);
+  const RefineResult b = retrying.refine(s.cam, s.obs, s.mesh, init);
+  ASSERT_TRUE(a.plausible);
+  EXPECT_FALSE(b.retried);
+  EXPECT_TRUE(b.pose.matrix().isApprox(a.pose.matrix(), 1e-12));
 }
