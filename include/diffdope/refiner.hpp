@@ -228,7 +228,8 @@ class Refiner {
                                        const std::vector<ObjectTarget>& objects);
 
   /// Optional progress callback, called once per iteration of refine() (iteration 0..total, total = the
-  /// configured iterations) with the best loss of any run so far.
+  /// configured iterations) with the best loss of any run so far; a retried refinement (retry_turn) counts
+  /// 0..total again for its second pass.
   std::function<void(int iteration, int total, double best_loss)> on_iteration;
 
  private:
@@ -261,7 +262,8 @@ class Refiner {
 /// Hypothesis evaluations (one render + loss + gradient of one pose) that refining one object with `o` costs at
 /// most: the runs of every iteration, less those successive halving drops, the shape scan as for a shape with
 /// the most turns (kMaxShapeTurns; an asymmetric one has none) and the final scoring. An early stop only
-/// lowers it. The unit of RefineTimeEstimator (refine_time.hpp).
+/// lowers it; a retry of a rejected result (retry_turn) doubles it for that object. The unit of
+/// RefineTimeEstimator (refine_time.hpp).
 long planned_evaluations(const RefinerOptions& o);
 
 /// One plain gradient step of the refiner's parametrisation: translation of the object's centre `pivot`
