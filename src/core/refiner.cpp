@@ -63,6 +63,13 @@ double milliseconds_since(std::chrono::steady_clock::time_point start) {
   return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
 }
 
+/// An object's starts: its initial pose, then its alternatives.
+std::vector<Pose> starts_of(const ObjectTarget& t) {
+  std::vector<Pose> starts{t.initial};
+  starts.insert(starts.end(), t.alternatives.begin(), t.alternatives.end());
+  return starts;
+}
+
 /// A rejected result and its retry's (RefinerOptions::retry_turn): the lower loss wins; initial_loss stays the
 /// caller's starts' and time_ms covers both refinements.
 RefineResult keep_better(RefineResult first, RefineResult retry, double time_ms) {
@@ -626,9 +633,7 @@ std::vector<RefineResult> Refiner::refine_all(const Camera& camera, const Observ
   for (size_t k = 0; k < objects.size(); ++k) {
     if (!objects[k].explore || !objects[k].mesh || !wants_retry(out[k])) continue;
     ObjectTarget t = objects[k];
-    std::vector<Pose> initials{t.initial};
-    initials.insert(initials.end(), t.alternatives.begin(), t.alternatives.end());
-    const std::vector<Pose> starts = retry_starts(*t.mesh, initials);
+    const std::vector<Pose> starts = retry_starts(*t.mesh, starts_of(t));
     t.alternatives.assign(starts.begin() + 1, starts.end());
     again.push_back(std::move(t));
     which.push_back(k);
@@ -668,9 +673,7 @@ std::vector<RefineResult> Refiner::refine_all_once(const Camera& camera, const O
       o.depth = frame.depth;
       o.edges = frame.edges;
       if (!t.mask.empty()) o.mask = t.mask.type() == CV_32FC1 ? t.mask : to_mask_float(t.mask);
-      std::vector<Pose> initials{t.initial};
-      initials.insert(initials.end(), t.alternatives.begin(), t.alternatives.end());
-      runs[k] = std::make_unique<RefineRun>(options_, camera, o, *t.mesh, initials, shape_turns(*t.mesh, t.explore),
+      runs[k] = std::make_unique<RefineRun>(options_, camera, o, *t.mesh, starts_of(t), shape_turns(*t.mesh, t.explore),
                                             shared_frame ? &*shared_frame : nullptr,
                                             coarse_frame ? &*coarse_frame : nullptr);
       runs[k]->set_print_axes(print_axes(*t.mesh));
