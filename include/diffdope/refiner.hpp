@@ -65,13 +65,14 @@ struct RefinerOptions {
   /// revolution of its shape (within explore_tolerance: a bottle's axis, or a mug's body axis, which the handle
   /// hides from silhouette and depth whenever it is out of sight; declared symmetries excluded) by up to
   /// +-print_search radians, and the turn where the print agrees best with the image is kept. Radians; 0 = off
-  /// (the paper's algorithm), as is explore_tolerance = 0. Needs rgb.
+  /// (the paper's algorithm), as is explore_tolerance = 0. Needs rgb and a mask or depth (they hold the other
+  /// degrees of freedom while the print decides the turn); skipped with RGB alone.
   double print_search = 0.7;  // [0, pi]
   /// Retry of a rejected result: when the verdict finds a refined pose implausible (RefineResult::plausible
   /// false, no error), the object is refined again from its initial pose(s) and from each turned by
   /// +-retry_turn about the surface's three principal axes (through its centroid; turns about a declared
-  /// symmetry left out), the B runs shared out among these starts, and the result with the lower loss is kept
-  /// (RefineResult::retried). A hard start that descent took into a wrong basin (a box seen edge-on) mostly has
+  /// symmetry left out), the B runs shared out among these starts; the retry's result replaces the first only
+  /// when the verdict accepts it and its loss is lower (RefineResult::retried). A hard start that descent took into a wrong basin (a box seen edge-on) mostly has
   /// a turned start in the right one. Costs a second refinement, for rejected results only; never for tracked
   /// starts (ObjectTarget::explore false) or refine_views(). Radians; 0 = off (the paper's algorithm).
   double retry_turn = 0.52;  // [0, pi]
@@ -142,7 +143,7 @@ struct RefineResult {
                                       // `loss` is then at the turned pose, up to kPrintLossTolerance (2 %)
                                       // above the winning run's best (and so, rarely, above initial_loss)
   bool retried = false;               // the first result was rejected and refined again from turned starts
-                                      // (retry_turn): the fields are the better one's (initial_loss the
+                                      // (retry_turn): the fields are the kept one's (initial_loss the
                                       // caller's starts'), start may then index a turned start, time_ms is both
   int iterations = 0;                 // iterations actually run (early stop)
   double time_ms = 0;                 // wall time of refine() (refine_all(): from the call's start to this object's end)
@@ -167,6 +168,11 @@ struct RefineResult {
   };
   std::vector<ViewScores> view_scores;
 };
+
+/// Whether the retry of a rejected result (RefinerOptions::retry_turn) replaces the first: only when the verdict
+/// accepts it and its loss is lower. A retry rejected too keeps the first result, the one nearer the caller's
+/// start: with weak evidence (RGB alone) a start turned 30-40 degrees can end a fraction of a percent lower.
+bool retry_replaces(const RefineResult& first, const RefineResult& retry);
 
 /// One object of a frame for Refiner::refine_all().
 struct ObjectTarget {

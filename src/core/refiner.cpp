@@ -70,11 +70,11 @@ std::vector<Pose> starts_of(const ObjectTarget& t) {
   return starts;
 }
 
-/// A rejected result and its retry's (RefinerOptions::retry_turn): the lower loss wins; initial_loss stays the
-/// caller's starts' and time_ms covers both refinements.
+/// A rejected result and its retry's (RefinerOptions::retry_turn), the one retry_replaces() picks; initial_loss
+/// stays the caller's starts' and time_ms covers both refinements.
 RefineResult keep_better(RefineResult first, RefineResult retry, double time_ms) {
   const double initial_loss = first.initial_loss;
-  RefineResult& kept = retry.error.empty() && retry.loss.total < first.loss.total ? retry : first;
+  RefineResult& kept = retry_replaces(first, retry) ? retry : first;
   kept.initial_loss = initial_loss;
   kept.retried = true;
   kept.time_ms = time_ms;
@@ -137,6 +137,10 @@ cv::Mat window_mask(const Camera& cam, const Mesh& mesh, const Pose& pose, doubl
 }
 
 }  // namespace
+
+bool retry_replaces(const RefineResult& first, const RefineResult& retry) {
+  return retry.error.empty() && retry.plausible && retry.loss.total < first.loss.total;
+}
 
 RefineResult Refiner::refine(const Camera& camera, const Observation& observed, const Mesh& mesh,
                              const Pose& initial) {
@@ -534,7 +538,11 @@ RefineResult RefineRun::finish(Renderer& renderer) {
   }
   const bool one_view = meshes_.size() == 1;
   const Mesh& mesh0 = *meshes_.front();
-  if (one_view && std::isfinite(res.loss.total) && fine_[0].obs.has_texture()) {
+  // The turn may cost up to kPrintLossTolerance of loss only because a mask or depth holds every other degree of
+  // freedom: with RGB alone that loss is the print comparison itself, and a turn that moves the handle (unseen
+  // without a mask) to where the print fits slightly better would be taken 20-30 degrees from the truth.
+  const Observation& obs0 = fine_[0].obs;
+  if (one_view && std::isfinite(res.loss.total) && obs0.has_texture() && (has_mask_ || obs0.has_depth())) {
     LossOptions with_print = loss_;
     with_print.weight_texture = 1.0;
     const PrintEvaluator evaluate_print = [&](const std::vector<Pose>& poses, std::vector<LossValue>& out) {

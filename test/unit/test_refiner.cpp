@@ -481,3 +481,22 @@ TEST(Refiner, ARejectedResultIsRefinedAgainFromTurnedStarts) {
   EXPECT_FALSE(b.retried);
   EXPECT_TRUE(b.pose.matrix().isApprox(a.pose.matrix(), 1e-12));
 }
+
+
+TEST(Refiner, ARetryReplacesTheFirstResultOnlyWhenAcceptedAndLower) {
+  RefineResult first;
+  first.plausible = false;
+  first.loss.total = 0.40;
+  RefineResult retry;
+  retry.plausible = true;
+  retry.loss.total = 0.30;
+  EXPECT_TRUE(retry_replaces(first, retry));
+  retry.loss.total = 0.45;  // accepted but worse fit
+  EXPECT_FALSE(retry_replaces(first, retry));
+  retry.loss.total = 0.30;
+  retry.plausible = false;  // rejected too: lower loss alone does not win (RGB-only turned starts)
+  EXPECT_FALSE(retry_replaces(first, retry));
+  retry.plausible = true;
+  retry.error = "lost";
+  EXPECT_FALSE(retry_replaces(first, retry));
+}
