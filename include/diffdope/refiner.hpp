@@ -180,7 +180,9 @@ struct ObjectTarget {
   Pose initial;
   cv::Mat mask;  // this object's visible mask (CV_32FC1, or any type to_mask_float takes); may be empty
   std::vector<Pose> alternatives;  // further initial poses; the runs are shared out among all of them
-  bool explore = true;  // false: no shape scan (explore_tolerance) nor retry (retry_turn), e.g. a tracked start
+  /// false (a tracked start, explores() in object_track.hpp): no shape scan (explore_tolerance) nor retry
+  /// (retry_turn), and the print alignment searches only +-kTrackedPrintSearch (print_alignment.hpp).
+  bool explore = true;
 };
 
 class RefineRun;  // (src/core/refine_run.hpp)
@@ -206,6 +208,10 @@ class Refiner {
   void set_options(const RefinerOptions& options);
   /// The backend in use ("cpu" or "cuda").
   std::string backend() const { return renderer_->name(); }
+  /// Does now what the first refinement of `mesh` would otherwise pay: the shape analysis and print axes (cached
+  /// per mesh) and the renderer's copy of its geometry and textures (48 MB for a 2048^2 atlas). A node calls it
+  /// while loading its objects, so its first detection is refined as fast as the later ones.
+  void prepare(const Mesh& mesh);
 
   /// Refines one object. `observed` holds the full-resolution images (any of rgb / depth / mask may be
   /// empty; at least one of rgb or depth is needed), `camera` their intrinsics. Throws std::invalid_argument

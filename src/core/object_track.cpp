@@ -62,6 +62,12 @@ std::vector<Seed> ObjectTrack::seeds_for(double image_stamp) {
   return out;
 }
 
+bool ObjectTrack::steady(double image_stamp) const {
+  if (!track_ || !previous_) return false;
+  const double interval = track_->stamp - previous_->stamp, age = image_stamp - track_->stamp;
+  return interval > 0 && age >= 0 && age <= 2 * interval;
+}
+
 std::optional<Seed> ObjectTrack::predict(double image_stamp) const {
   if (!options_.predict || !track_ || !previous_) return std::nullopt;
   const double dt_last = track_->stamp - previous_->stamp, dt = image_stamp - track_->stamp;
@@ -116,6 +122,22 @@ void ObjectTrack::reset() {
   track_.reset();
   previous_.reset();
   failures_ = 0;
+}
+
+bool explores(const std::vector<Seed>& starts) {
+  if (starts.empty()) return false;
+  if (starts.front().source == SeedSource::kRequest) return true;
+  for (const Seed& s : starts)
+    if (s.source == SeedSource::kTrack || s.source == SeedSource::kPrediction) return false;
+  return starts.front().source == SeedSource::kDetector;
+}
+
+RefinerOptions tracked_options(const RefinerOptions& o, const TrackOptions& t) {
+  RefinerOptions out = o;
+  if (t.batch_size > 0) out.batch_size = t.batch_size;
+  if (t.iterations > 0) out.iterations = t.iterations;
+  out.validate();
+  return out;
 }
 
 }  // namespace diffdope

@@ -28,8 +28,12 @@ class RefineRun {
       : RefineRun(options, {RefineView{camera, observed, &mesh}}, initials, std::move(shape_turns), scaled_frame,
                   coarse_frame) {}
 
-  /// The axes finish() aligns the print about (RefinerOptions::print_search; Refiner::print_axes()).
-  void set_print_axes(std::vector<ShapeRotation> axes) { print_axes_ = std::move(axes); }
+  /// The axes finish() aligns the print about (Refiner::print_axes()) and the range searched about each
+  /// (radians; RefinerOptions::print_search, or less about a tracked start).
+  void set_print_axes(std::vector<ShapeRotation> axes, double range) {
+    print_axes_ = std::move(axes);
+    print_range_ = range;
+  }
   bool done() const { return done_; }
   /// The poses to evaluate this iteration (the active runs; during the shape scan, each turned by every
   /// shape turn).
@@ -83,6 +87,7 @@ class RefineRun {
   static constexpr double kScanMargin = 0.01;
   std::vector<Pose> turns_;  // model-frame turns tried on every run
   std::vector<ShapeRotation> print_axes_;
+  double print_range_ = 0;
   int scan_at_ = -1;         // the iteration whose batch() is preceded by the scan (-1: none)
   bool scanning_ = false, scanned_ = false;
   double best_overall_;

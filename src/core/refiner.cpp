@@ -142,6 +142,16 @@ bool retry_replaces(const RefineResult& first, const RefineResult& retry) {
   return retry.error.empty() && retry.plausible && retry.loss.total < first.loss.total;
 }
 
+void Refiner::prepare(const Mesh& mesh) {
+  shape_rotations(mesh);
+  print_axes(mesh);
+  // One small render, the object two diameters in front of the camera: the renderer takes in the mesh.
+  const Camera camera(64, 64, 31.5, 31.5, 64, 64);
+  const Pose pose(Eigen::Matrix3d::Identity(),
+                  Eigen::Vector3d(0, 0, 2 * mesh.diameter() + options_.render.near_plane) - mesh.center().cast<double>());
+  renderer_->render(camera, mesh, {pose}, cv::Mat());
+}
+
 RefineResult Refiner::refine(const Camera& camera, const Observation& observed, const Mesh& mesh,
                              const Pose& initial) {
   return refine(camera, observed, mesh, std::vector<Pose>{initial});
@@ -159,7 +169,7 @@ RefineResult Refiner::refine(const Camera& camera, const Observation& observed, 
 RefineResult Refiner::refine_once(const Camera& camera, const Observation& observed, const Mesh& mesh,
                                   const std::vector<Pose>& initials) {
   RefineRun run(options_, camera, observed, mesh, initials, shape_turns(mesh, true));
-  run.set_print_axes(print_axes(mesh));
+  run.set_print_axes(print_axes(mesh), options_.print_search);
   return drive(run);
 }
 
@@ -551,7 +561,7 @@ RefineResult RefineRun::finish(Renderer& renderer) {
     Pose aligned = res.pose;
     bool turned = false;
     for (const ShapeRotation& axis : print_axes_) {
-      const PrintAlignment a = align_print(aligned, axis, o.print_search, loss_.weight_texture, evaluate_print);
+      const PrintAlignment a = align_print(aligned, axis, print_range_, loss_.weight_texture, evaluate_print);
       aligned = a.pose;
       turned = turned || a.angle != 0;
     }
@@ -684,7 +694,8 @@ std::vector<RefineResult> Refiner::refine_all_once(const Camera& camera, const O
       runs[k] = std::make_unique<RefineRun>(options_, camera, o, *t.mesh, starts_of(t), shape_turns(*t.mesh, t.explore),
                                             shared_frame ? &*shared_frame : nullptr,
                                             coarse_frame ? &*coarse_frame : nullptr);
-      runs[k]->set_print_axes(print_axes(*t.mesh));
+      runs[k]->set_print_axes(print_axes(*t.mesh), t.explore ? options_.print_search
+                                                             : std::min(options_.print_search, kTrackedPrintSearch));
     } catch (const std::exception& e) {
       fail(k, e.what());
     }

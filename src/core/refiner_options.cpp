@@ -234,6 +234,8 @@ void TrackOptions::validate() const {
   check("track_timeout", track_timeout, 0, 3600, " seconds");
   check("max_track_failures", max_failures, 1, 1000);
   check("max_extrapolation", max_extrapolation, 0, 100, " intervals");
+  check("track_batch_size", batch_size, 0, RefinerOptions::kMaxBatchSize, " (0: the refiner's)");
+  check("track_iterations", iterations, 0, RefinerOptions::kMaxIterations, " (0: the refiner's)");
 }
 
 }  // namespace diffdope

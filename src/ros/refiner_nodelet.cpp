@@ -57,7 +57,10 @@ void RefinerNodelet::onInit() {
                       << to_string(mode_)
                       << ", inputs rgb" << (use_depth_ ? "+depth" : "") << (use_mask_ ? "+mask" : "")
                       << ", " << slots_.size() << " object(s), " << refiner_options_.batch_size << " runs x "
-                      << refiner_options_.iterations << " iterations, backend "
+                      << refiner_options_.iterations << " iterations (live tracks: "
+                      << (track_options_.batch_size > 0 ? track_options_.batch_size : refiner_options_.batch_size)
+                      << " x " << (track_options_.iterations > 0 ? track_options_.iterations : refiner_options_.iterations)
+                      << "), backend "
                       << (refiner_ ? refiner_->backend() : std::string("none")));
 }
 
@@ -163,6 +166,7 @@ void RefinerNodelet::loadObjects() {
     slot->config = cfg.objects[i];
     try {
       slot->mesh = std::make_unique<diffdope::Mesh>(diffdope::load_object_mesh(slot->config));
+      refiner_->prepare(*slot->mesh);  // its first detection then pays no set-up
       // Detections within one diameter of an instance's last known centre are that instance's.
       slot->tracks = std::make_unique<diffdope::InstanceTracks>(
           slot->config.max_instances, track_options_, slot->mesh->center().cast<double>(), slot->mesh->diameter());

@@ -219,8 +219,15 @@ void RefinerNodelet::processStreaming(const std::shared_ptr<const Frame>& frame)
       auto starts = slots_[i]->tracks->track(k).seeds_for(stamp);
       if (!starts.empty()) seeds.push_back({i, k, std::move(starts)});
     }
+  // Every object on a steady track: the tracking budget (~track_batch_size x ~track_iterations).
+  bool all_steady = true;
+  for (const auto& s : seeds)
+    all_steady = all_steady && !diffdope::explores(s.starts) && slots_[s.slot]->tracks->track(s.instance).steady(stamp);
   std::vector<std::string> skipped;
-  if (!seeds.empty()) refineAndPublish(*frame, seeds, refiner_options_, &skipped);
+  if (!seeds.empty())
+    refineAndPublish(*frame, seeds,
+                     all_steady ? diffdope::tracked_options(refiner_options_, track_options_) : refiner_options_,
+                     &skipped);
   updateTrackingFlags(stamp);
 }
 
@@ -372,10 +379,7 @@ std::vector<diffdope_ros::RefinedPose> RefinerNodelet::refineAndPublish(
     t.mesh = s.mesh.get();
     t.initial = starts.front().pose;
     for (size_t j = 1; j < starts.size(); ++j) t.alternatives.push_back(starts[j].pose);
-    // The shape scan looks for a turn silhouette and depth cannot see: worth it from a detection or a caller's
-    // pose; a track that is already right would only risk flipping between frames on a weakly printed object.
-    t.explore = starts.front().source == diffdope::SeedSource::kDetector ||
-                starts.front().source == diffdope::SeedSource::kRequest;
+    t.explore = diffdope::explores(starts);  // (shape scan, retry: not from a live track)
     if (!frame.labels.empty()) {
       t.mask = instance_masks[i][used_masks[i]++];
       if (cv::countNonZero(t.mask) == 0) {

@@ -47,6 +47,8 @@ RefinerConfig to_config(const RuntimeSettings& s) {
   c.track_timeout = s.track.track_timeout;
   c.max_track_failures = s.track.max_failures;
   c.predict_motion = s.track.predict;
+  c.track_batch_size = s.track.batch_size;
+  c.track_iterations = s.track.iterations;
   return c;
 }
 
@@ -78,6 +80,8 @@ RuntimeSettings from_config(const RefinerConfig& c, const RuntimeSettings& base)
   s.track.track_timeout = c.track_timeout;
   s.track.max_failures = c.max_track_failures;
   s.track.predict = c.predict_motion;
+  s.track.batch_size = c.track_batch_size;
+  s.track.iterations = c.track_iterations;
   o.validate();  // the same checks as the YAML's
   s.track.validate();
   return s;

@@ -37,6 +37,8 @@ RuntimeSettings someSettings() {
   s.track.track_timeout = 2.0;
   s.track.max_failures = 4;
   s.track.predict = false;
+  s.track.batch_size = 5;
+  s.track.iterations = 17;
   return s;
 }
 
@@ -47,6 +49,8 @@ TEST(RuntimeSettings, RoundTripKeepsEveryValue) {
   const RuntimeSettings back = diffdope_ros::from_config(diffdope_ros::to_config(s), RuntimeSettings());
   EXPECT_EQ(back.mode, s.mode);
   EXPECT_EQ(back.refiner.iterations, 37);
+  EXPECT_EQ(back.track.batch_size, 5);
+  EXPECT_EQ(back.track.iterations, 17);
   EXPECT_EQ(back.refiner.batch_size, 9);
   EXPECT_DOUBLE_EQ(back.refiner.image_scale, 0.4);
   EXPECT_DOUBLE_EQ(back.refiner.coarse_fraction, 0.25);

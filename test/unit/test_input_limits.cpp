@@ -180,7 +180,9 @@ TEST(InputLimits, TrackingOptionsOutsideTheirRangeAreRefused) {
       {"max_detection_age", [](TrackOptions& o) { o.max_detection_age = kNaN; }},
       {"track_timeout", [](TrackOptions& o) { o.track_timeout = -1; }},
       {"max_track_failures", [](TrackOptions& o) { o.max_failures = 0; }},
-      {"max_extrapolation", [](TrackOptions& o) { o.max_extrapolation = kInf; }}};
+      {"max_extrapolation", [](TrackOptions& o) { o.max_extrapolation = kInf; }},
+      {"track_batch_size", [](TrackOptions& o) { o.batch_size = -1; }},
+      {"track_iterations", [](TrackOptions& o) { o.iterations = RefinerOptions::kMaxIterations + 1; }}};
   for (const auto& [name, set] : bad) {
     TrackOptions o;
     set(o);

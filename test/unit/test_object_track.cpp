@@ -356,3 +356,49 @@ TEST(ObjectTrack, ASymmetricObjectIsReportedWithoutSpinOrFlip) {
     track.report(reported, true, 1.0 + k);
   }
 }
+
+TEST(ObjectTrack, OnlyACallersPoseOrADetectionWithoutALiveTrackExplores) {
+  const Seed detection{at(0), SeedSource::kDetector, 1.0}, track{at(0.01), SeedSource::kTrack, 0.9},
+      prediction{at(0.02), SeedSource::kPrediction, 0.9}, request{at(0), SeedSource::kRequest, 1.0};
+  EXPECT_FALSE(explores({}));
+  EXPECT_TRUE(explores({detection}));
+  EXPECT_TRUE(explores({request}));
+  EXPECT_TRUE(explores({request, track}));  // a caller asked: the full refinement
+  EXPECT_FALSE(explores({detection, track, prediction}));  // the detection is one more start of a live track
+  EXPECT_FALSE(explores({track}));
+  EXPECT_FALSE(explores({track, prediction}));
+}
+
+TEST(ObjectTrack, LiveTracksGetTheTrackingBudget) {
+  RefinerOptions o;
+  o.batch_size = 32;
+  o.iterations = 60;
+  TrackOptions t;
+  const RefinerOptions tracked = tracked_options(o, t);
+  EXPECT_EQ(tracked.batch_size, t.batch_size);
+  EXPECT_EQ(tracked.iterations, t.iterations);
+  EXPECT_LT(planned_evaluations(tracked), planned_evaluations(o) / 4);
+  EXPECT_DOUBLE_EQ(tracked.lr_high, o.lr_high);  // nothing else changes
+  t.batch_size = 0;  // 0: the refiner's own
+  t.iterations = 0;
+  EXPECT_EQ(tracked_options(o, t).batch_size, 32);
+  EXPECT_EQ(tracked_options(o, t).iterations, 60);
+}
+
+TEST(ObjectTrack, ATrackIsSteadyWhenRefinedTwiceAndNotStalled) {
+  ObjectTrack t;
+  EXPECT_FALSE(t.steady(1.0));
+  t.add_detection(at(0), 1.0);
+  t.seeds_for(1.0);
+  t.report(at(0), true, 1.0);
+  EXPECT_FALSE(t.steady(1.1));  // one refined frame: no interval to judge by
+  t.report(at(0.001), true, 1.1);
+  EXPECT_TRUE(t.steady(1.2));
+  EXPECT_TRUE(t.steady(1.29));  // up to twice the last interval
+  EXPECT_FALSE(t.steady(1.5));  // stalled: the object may have moved further than usual
+  t.report(at(0.002), true, 1.6);  // a refinement after the stall: steady at the new, slower pace
+  EXPECT_TRUE(t.steady(1.7));
+  t.report(at(0.0), false, 1.7);
+  t.report(at(0.0), false, 1.8);  // lost
+  EXPECT_FALSE(t.steady(1.9));
+}

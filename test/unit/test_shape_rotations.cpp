@@ -250,3 +250,29 @@ TEST(Refiner, WithRgbAloneThePrintAlignmentIsSkipped) {
     EXPECT_LT(angle_between(r.pose.R, truth.R), 18.0);
   }
 }
+
+TEST(Refiner, AboutATrackedStartThePrintIsSoughtOnlyNearby) {
+  // The labelled can of the test above in refine_all: from a tracked start (explore false) the alignment
+  // searches +-kTrackedPrintSearch (10 degrees), enough for the spin since the last frame; from a detection, its
+  // whole range.
+  const test::LabelledCan s = test::labelled_can();
+  RefinerOptions o;
+  o.batch_size = 8;
+  o.iterations = 30;
+  o.coarse_fraction = 0.5;
+  o.image_scale = 1.0;
+  o.loss.weight_rgb = 0;
+  Refiner refiner(o);
+  const auto refined = [&](double degrees_off, bool explore) {
+    ObjectTarget t{&s.can, s.truth * test::about_can_axis(degrees_off), s.obs.mask, {}, explore};
+    return refiner.refine_all(s.cam, s.obs, {t})[0];
+  };
+  const RefineResult near_track = refined(6, false);
+  EXPECT_LT(angle_between(near_track.pose.R, s.truth.R), 1.0);
+  EXPECT_NEAR(degrees(std::abs(near_track.print_turn)), 6.0, 1.0);
+  const RefineResult far_track = refined(20, false);
+  EXPECT_LE(degrees(std::abs(far_track.print_turn)), degrees(kTrackedPrintSearch) + 1e-6);
+  EXPECT_GT(angle_between(far_track.pose.R, s.truth.R), 8.0);
+  const RefineResult far_detection = refined(20, true);
+  EXPECT_LT(angle_between(far_detection.pose.R, s.truth.R), 1.0);
+}
