@@ -57,7 +57,7 @@ void RefinerNodelet::onInit() {
                       << to_string(mode_)
                       << ", inputs rgb" << (use_depth_ ? "+depth" : "") << (use_mask_ ? "+mask" : "")
                       << ", " << slots_.size() << " object(s), " << refiner_options_.batch_size << " runs x "
-                      << refiner_options_.iterations << " iterations (live tracks: "
+                      << refiner_options_.iterations << " iterations (steady tracks: "
                       << (track_options_.batch_size > 0 ? track_options_.batch_size : refiner_options_.batch_size)
                       << " x " << (track_options_.iterations > 0 ? track_options_.iterations : refiner_options_.iterations)
                       << "), backend "
