@@ -50,7 +50,7 @@ struct Seed {
 bool explores(const std::vector<Seed>& starts);
 
 /// The refiner options for a frame whose targets all start from steady tracks (none explores(), each
-/// ObjectTrack::steady()): `o` with TrackOptions::batch_size and iterations where those are set.
+/// ObjectTrack::steady()): `o` with its batch_size and iterations capped at TrackOptions' (where those are set).
 RefinerOptions tracked_options(const RefinerOptions& o, const TrackOptions& t);
 
 class ObjectTrack {

@@ -1,5 +1,6 @@
 #include "diffdope/object_track.hpp"
 
+#include <algorithm>
 #include <cmath>
 
 namespace diffdope {
@@ -134,8 +135,9 @@ bool explores(const std::vector<Seed>& starts) {
 
 RefinerOptions tracked_options(const RefinerOptions& o, const TrackOptions& t) {
   RefinerOptions out = o;
-  if (t.batch_size > 0) out.batch_size = t.batch_size;
-  if (t.iterations > 0) out.iterations = t.iterations;
+  // A cap, never a raise: a user who lowers the refiner's own budget lowers the tracked one with it.
+  if (t.batch_size > 0) out.batch_size = std::min(o.batch_size, t.batch_size);
+  if (t.iterations > 0) out.iterations = std::min(o.iterations, t.iterations);
   out.validate();
   return out;
 }

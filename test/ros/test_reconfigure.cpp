@@ -91,10 +91,11 @@ TEST(Reconfigure, ChangesTakeEffectAtTheNextFramesAndBadSetsAreReverted) {
   EXPECT_NEAR(doubleValue(start, "image_scale"), 0.45, 1e-9);
   EXPECT_EQ(strValue(start, "mode"), "tracking");
   ASSERT_TRUE(waitForArrays(ros::WallTime(), 3, 60)) << "the refiner never streamed";
+  // 40: the detection budget; 20: the tracking budget (~track_iterations) of frames on steady tracks.
   for (const auto& r : world->since(ros::WallTime()))
-    for (int it : r.iterations) EXPECT_EQ(it, 40);
+    for (int it : r.iterations) EXPECT_TRUE(it == 40 || it == 20) << it;
 
-  // Fewer, shorter runs: every result after the one in flight has 12 iterations.
+  // Fewer, shorter runs: every result after the one in flight has 12 iterations (the tracking budget is a cap).
   dynamic_reconfigure::Config change;
   add(change.ints, "iterations", 12);
   add(change.ints, "batch_size", 6);
@@ -125,6 +126,21 @@ TEST(Reconfigure, ChangesTakeEffectAtTheNextFramesAndBadSetsAreReverted) {
   const auto still = world->since(refused);
   for (size_t i = 1; i < still.size(); ++i)
     for (int it : still[i].iterations) EXPECT_EQ(it, 12);
+
+  // A smaller tracking budget: frames on steady tracks take it, the others keep the 12 iterations.
+  dynamic_reconfigure::Config tracked;
+  add(tracked.ints, "track_iterations", 5);
+  EXPECT_EQ(intValue(set(tracked), "track_iterations"), 5);
+  const ros::WallTime retracked = ros::WallTime::now();
+  ASSERT_TRUE(waitForArrays(retracked, 6, 60)) << "no frames refined after the tracking budget changed";
+  const auto budgets = world->since(retracked);
+  int on_track_budget = 0;
+  for (size_t i = 1; i < budgets.size(); ++i)
+    for (int it : budgets[i].iterations) {
+      EXPECT_TRUE(it == 12 || it == 5) << it;
+      on_track_budget += it == 5;
+    }
+  EXPECT_GT(on_track_budget, 0) << "no frame refined on the tracking budget";
 
   // on_request: streaming stops (one refinement may be in flight); tracking: it resumes.
   dynamic_reconfigure::Config stop;

@@ -383,6 +383,12 @@ TEST(ObjectTrack, LiveTracksGetTheTrackingBudget) {
   t.iterations = 0;
   EXPECT_EQ(tracked_options(o, t).batch_size, 32);
   EXPECT_EQ(tracked_options(o, t).iterations, 60);
+  // A cap: a refiner already cheaper than the tracking budget stays as it is.
+  t = TrackOptions();
+  o.batch_size = 6;
+  o.iterations = 12;
+  EXPECT_EQ(tracked_options(o, t).batch_size, 6);
+  EXPECT_EQ(tracked_options(o, t).iterations, 12);
 }
 
 TEST(ObjectTrack, ATrackIsSteadyWhenRefinedTwiceAndNotStalled) {
