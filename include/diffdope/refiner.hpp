@@ -72,8 +72,8 @@ struct RefinerOptions {
   /// false, no error), the object is refined again from its initial pose(s) and from each turned by
   /// +-retry_turn about the surface's three principal axes (through its centroid; turns about a declared
   /// symmetry left out), the B runs shared out among these starts; the retry's result replaces the first only
-  /// when the verdict accepts it and its loss is lower (RefineResult::retried). A hard start that descent took into a wrong basin (a box seen edge-on) mostly has
-  /// a turned start in the right one. Costs a second refinement, for rejected results only; never for tracked
+  /// when the verdict accepts it and its loss is lower (RefineResult::retried). A hard start that descent took
+  /// into a wrong basin (a box seen edge-on) mostly has a turned start in the right one. Costs a second refinement, for rejected results only; never for tracked
   /// starts (ObjectTarget::explore false) or refine_views(). Radians; 0 = off (the paper's algorithm).
   double retry_turn = 0.52;  // [0, pi]
   LossOptions loss;             // term weights (all 1 as in the paper) and robustness constants

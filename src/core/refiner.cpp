@@ -550,7 +550,7 @@ RefineResult RefineRun::finish(Renderer& renderer) {
   const Mesh& mesh0 = *meshes_.front();
   // The turn may cost up to kPrintLossTolerance of loss only because a mask or depth holds every other degree of
   // freedom: with RGB alone that loss is the print comparison itself, and a turn that moves the handle (unseen
-  // without a mask) to where the print fits slightly better would be taken 20-30 degrees from the truth.
+  // without a mask) to where the print fits slightly better would be taken 30-40 degrees from the truth.
   const Observation& obs0 = fine_[0].obs;
   if (one_view && std::isfinite(res.loss.total) && obs0.has_texture() && (has_mask_ || obs0.has_depth())) {
     LossOptions with_print = loss_;

@@ -175,6 +175,26 @@ TEST(Refiner, SeveralStartsTheBetterOneWins) {
   EXPECT_LT(add_mm(s, all[0].pose), 2.0);
 }
 
+TEST(Refiner, PreparingAMeshChangesNoResult) {
+  // Refiner::prepare() only does ahead what the first refinement would (shape analysis, print axes, the
+  // renderer taking in the mesh): the refinements after it are those of a refiner that never prepared.
+  const Scene s = make_scene(2);
+  std::mt19937_64 rng(5);
+  const Pose start = perturb_pose(s.truth, s.mesh.center(), 15 * M_PI / 180, 0.01, rng);
+  RefinerOptions o = test_options();
+  o.iterations = 20;
+  Refiner plain(o), prepared(o);
+  prepared.prepare(s.mesh);
+  prepared.prepare(s.mesh);  // twice: nothing more happens
+  const RefineResult a = plain.refine(s.cam, s.obs, s.mesh, start);
+  const RefineResult b = prepared.refine(s.cam, s.obs, s.mesh, start);
+  ASSERT_TRUE(a.error.empty()) << a.error;
+  EXPECT_EQ(a.loss.total, b.loss.total);
+  EXPECT_EQ((a.pose.t - b.pose.t).norm(), 0.0);
+  EXPECT_EQ((a.pose.R - b.pose.R).norm(), 0.0);
+  EXPECT_LT(add_mm(s, b.pose), add_mm(s, start));
+}
+
 TEST(Refiner, EasyStartsDoNotGetWorse) {
   for (uint32_t seed : {2u, 3u}) {
     const Scene s = make_scene(seed);
