@@ -436,8 +436,13 @@ struct TextureStage : PixelStage<TextureStage> {
         if (x < 0 || y < 0 || x >= hy.w || y >= hy.h || gx < 0 || gy < 0 || gx >= p.image_w || gy >= p.image_h) {
           w = 0.f;
         } else {
-          w = fminf(w, p.post[hy.offset + y * hy.w + x].cov);
-          if (o.S) w = fminf(w, o.S[gy * p.image_w + gx]);
+          // (Comparisons, not fminf: a library call on the host. A NaN is skipped either way.)
+          const float cov = p.post[hy.offset + y * hy.w + x].cov;
+          w = cov < w ? cov : w;
+          if (o.S) {
+            const float S = o.S[gy * p.image_w + gx];
+            w = S < w ? S : w;
+          }
         }
       }
     const int pix = (hy.y0 + ly) * p.image_w + hy.x0 + lx;
