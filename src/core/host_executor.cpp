@@ -13,6 +13,7 @@
 #include <cstring>
 #include <memory>
 #include <string>
+#include <type_traits>
 #include <vector>
 
 #include "diffdope/thread_pool.hpp"
@@ -42,7 +43,12 @@ class HostExec {
 
   /// RenderOptions::threads (0 = all). DIFFDOPE_STAGE_PROFILE=1 in the environment: time every stage and print
   /// a table to stderr when the renderer goes away (for profiling; ~20 ns per stage and hypothesis).
-  explicit HostExec(int threads) : pool_(threads), profile_(std::getenv("DIFFDOPE_STAGE_PROFILE") != nullptr) {}
+  /// DIFFDOPE_EVERY_PIXEL=1: pixel stages walk every pixel of the regions, also far from the covered ones (the
+  /// same results, slower: a reference for tests).
+  explicit HostExec(int threads)
+      : pool_(threads),
+        profile_(std::getenv("DIFFDOPE_STAGE_PROFILE") != nullptr),
+        every_pixel_(std::getenv("DIFFDOPE_EVERY_PIXEL") != nullptr) {}
   ~HostExec() {
     if (!profile_) return;
     double total = 0;
@@ -82,15 +88,18 @@ class HostExec {
   void run_in_scratch(int B, const First& first, const Steps&... steps) {
     while (scratch_.size() < size_t(pool_.size())) scratch_.push_back(std::make_unique<Scratch>());
     pool_.parallel_for(B, [&](int h, int worker) {
-      const pipeline::Pipeline local = scratch_[size_t(worker)]->bind(first.stage.p, h);
+      Scratch& scratch = *scratch_[size_t(worker)];
+      const pipeline::Pipeline local = scratch.bind(first.stage.p, h);
       if (profile_) {
         region_pixels_ += int64_t(local.H->w) * local.H->h;
         triangles_ += local.objects[local.H->object].nt;
         ++hypotheses_;
       }
       int k = 0;
-      timed(with_pipeline(first, local), 0, h, k++);
-      (timed(with_pipeline(steps, local), 0, h, k++), ...);
+      scratch.rows.valid = false;
+      NearCoverage* near = every_pixel_ ? nullptr : &scratch.rows;
+      timed(with_pipeline(first, local), 0, h, k++, near);
+      (timed(with_pipeline(steps, local), 0, h, k++, near), ...);
     });
   }
 
@@ -115,10 +124,45 @@ class HostExec {
   }
 
  private:
+  /// Per row of a region, the pixels with a covered pixel within one pixel of them: [lo[y], hi[y]] (none when
+  /// lo > hi), a superset of where pixel stages with an Outside policy have work. From the z-buffer after the
+  /// raster (valid); one pass over the region's keys.
+  struct NearCoverage {
+    std::vector<int> lo, hi, row_lo, row_hi;
+    bool valid = false;
+
+    void compute(const pipeline::Pipeline& p, int h) {
+      const pipeline::Hypothesis& hy = p.H[h];
+      const int w = hy.w, rows = hy.h;
+      row_lo.assign(size_t(rows), w);
+      row_hi.assign(size_t(rows), -1);
+      for (int y = 0; y < rows; ++y) {
+        const unsigned long long* key = p.key + hy.offset + size_t(y) * size_t(w);
+        int x = 0;
+        while (x < w && key[x] == pipeline::kEmptyKey) ++x;
+        if (x == w) continue;
+        int last = w - 1;
+        while (key[last] == pipeline::kEmptyKey) --last;
+        row_lo[size_t(y)] = x, row_hi[size_t(y)] = last;
+      }
+      lo.assign(size_t(rows), w);
+      hi.assign(size_t(rows), -1);
+      for (int y = 0; y < rows; ++y) {
+        int l = w, r = -1;
+        for (int dy = -1; dy <= 1; ++dy)
+          if (y + dy >= 0 && y + dy < rows) l = std::min(l, row_lo[size_t(y + dy)]), r = std::max(r, row_hi[size_t(y + dy)]);
+        if (l > r) continue;
+        lo[size_t(y)] = std::max(0, l - 1), hi[size_t(y)] = std::min(w - 1, r + 1);
+      }
+      valid = true;
+    }
+  };
+
   /// One worker's per-hypothesis arrays, grown to the largest hypothesis it has run.
   struct Scratch {
     pipeline::Hypothesis hy;  // the hypothesis being run, its offsets zero
     pipeline::WorkArrays<HostBuffer> arrays;
+    NearCoverage rows;
 
     /// `p` for hypothesis h of it, as hypothesis 0 of a pipeline whose per-hypothesis arrays are these.
     pipeline::Pipeline bind(const pipeline::Pipeline& p, int h) {
@@ -139,40 +183,69 @@ class HostExec {
   }
 
   /// Runs step s for hypothesis h of its pipeline; sums go to hypothesis h_out's outputs. Stages over the pixels
-  /// of a region (kPixels) are walked row by row: no division per pixel.
+  /// of a region (kPixels) are walked row by row: no division per pixel; where `near` is valid, those with an
+  /// Outside policy only near the covered pixels. The raster's step computes `near` (when given).
   template <class Stage>
-  static void step(const pipeline::Each<Stage>& s, int h, int) {
+  static void step(const pipeline::Each<Stage>& s, int h, int, NearCoverage* near) {
     const int n = std::min(s.n, s.stage.count(h));
     if (n <= 0) return;
     if constexpr (pipeline::is_pixel_stage<Stage>::value) {
       const int w = s.stage.p.H[h].w, rows = n / w;
+      if constexpr (pipeline::outside_of<Stage>::known) {
+        if (near && near->valid) {
+          for (int ly = 0; ly < rows; ++ly) {
+            const int row = ly * w, lo = near->lo[size_t(ly)], hi = near->hi[size_t(ly)];
+            if (lo > hi) {
+              if constexpr (Stage::kOutside == pipeline::Outside::kFill) s.stage.fill_outside(row, w, h);
+              continue;
+            }
+            if constexpr (Stage::kOutside == pipeline::Outside::kFill) {
+              s.stage.fill_outside(row, lo, h);
+              s.stage.fill_outside(row + hi + 1, w - 1 - hi, h);
+            }
+            for (int lx = lo; lx <= hi; ++lx) s.stage.pixel(lx, ly, row + lx, h);
+          }
+          return;
+        }
+      }
       for (int ly = 0, i = 0; ly < rows; ++ly)
         for (int lx = 0; lx < w; ++lx, ++i) s.stage.pixel(lx, ly, i, h);
     } else {
       for (int i = 0; i < n; ++i) s.stage(i, h);
+      if constexpr (std::is_same<Stage, pipeline::RasterStage>::value)
+        if (near) near->compute(s.stage.p, h);
     }
   }
   template <class Stage>
-  static void step(const pipeline::Sum<Stage>& s, int h, int h_out) {
+  static void step(const pipeline::Sum<Stage>& s, int h, int h_out, NearCoverage* near) {
     static_assert(pipeline::is_pixel_stage<Stage>::value, "reducing stages run over the pixels of the regions");
     const int n = std::min(s.n, s.stage.count(h));
     if (n <= 0) return;
     double sum[Stage::kValues] = {};
     const int w = s.stage.p.H[h].w, rows = n / w;
-    for (int ly = 0, i = 0; ly < rows; ++ly)
-      for (int lx = 0; lx < w; ++lx, ++i) {
-        double v[Stage::kValues] = {};
-        s.stage.pixel(lx, ly, i, h, v);
-        for (int k = 0; k < Stage::kValues; ++k) sum[k] += v[k];
-      }
+    const auto add = [&](int lx, int ly, int i) {
+      double v[Stage::kValues] = {};
+      s.stage.pixel(lx, ly, i, h, v);
+      for (int k = 0; k < Stage::kValues; ++k) sum[k] += v[k];
+    };
+    // Skipped pixels add exact zeros: the sums are the same.
+    bool skip = false;
+    if constexpr (pipeline::outside_of<Stage>::known) {
+      static_assert(Stage::kOutside == pipeline::Outside::kSkip, "a reducing stage fills nothing");
+      skip = near && near->valid;
+    }
+    for (int ly = 0; ly < rows; ++ly) {
+      const int lo = skip ? near->lo[size_t(ly)] : 0, hi = skip ? near->hi[size_t(ly)] : w - 1;
+      for (int lx = lo; lx <= hi; ++lx) add(lx, ly, ly * w + lx);
+    }
     for (int k = 0; k < Stage::kValues; ++k) s.out[size_t(s.stride) * h_out + k] += sum[k];
   }
 
   template <class Step>
-  void timed(const Step& s, int h, int h_out, int k) {
-    if (!profile_) return step(s, h, h_out);
+  void timed(const Step& s, int h, int h_out, int k, NearCoverage* near = nullptr) {
+    if (!profile_) return step(s, h, h_out, near);
     const auto t0 = std::chrono::steady_clock::now();
-    step(s, h, h_out);
+    step(s, h, h_out, near);
     const auto ns = std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now() - t0);
     StageTime& t = times_[size_t(k) % kMaxSteps];
     t.name = decltype(s.stage)::kName;
@@ -185,7 +258,7 @@ class HostExec {
   };
 
   ThreadPool pool_;
-  const bool profile_;
+  const bool profile_, every_pixel_;
   static constexpr size_t kMaxSteps = 16;
   StageTime times_[kMaxSteps];
   std::atomic<long long> region_pixels_{0}, triangles_{0}, hypotheses_{0};

@@ -9,6 +9,7 @@
 // pixel buffers, its projected vertices from `vertex_offset` and triangles from `triangle_offset`. Every write
 // of a stage for hypothesis h lands in h's own ranges, which is what lets the emulation run hypotheses on
 // different threads with plain memory operations.
+#include <algorithm>
 #include <cstring>
 
 #include "diffdope/kernels/edges.hpp"
@@ -254,6 +255,21 @@ struct RasterStage {
   }
 };
 
+/// What a pixel stage does at a pixel with no covered pixel within one pixel of it (in its row or the rows above
+/// and below) after the raster: an executor that knows where those are (the CPU one, from the z-buffer) may then
+/// skip the per-pixel call. Such a pixel is in no discontinuity pair with a covered pixel, so no blend reaches
+/// it and its shading is empty. kSkip: pixel() changes nothing there (writes, sums); kFill: pixel() only writes
+/// what Stage::fill_outside(i, n, h) writes for pixels i .. i + n - 1. Stages without kOutside run everywhere.
+enum class Outside { kSkip, kFill };
+template <class Stage, class = void>
+struct outside_of {
+  static constexpr bool known = false;
+};
+template <class Stage>
+struct outside_of<Stage, decltype(void(Stage::kOutside))> {
+  static constexpr bool known = true;
+};
+
 /// What every stage over the pixels of the regions shares: element i of hypothesis h is pixel (i % w, i / w) of
 /// its region. The CUDA kernels call operator(), which splits i; the CPU executor walks the rows and calls
 /// Stage::pixel(lx, ly, i, h[, v]) directly (no division per pixel).
@@ -276,6 +292,13 @@ struct PixelStage {
 /// post starts as pre.
 struct ShadeStage : PixelStage<ShadeStage> {
   static constexpr const char* kName = "shade";
+  static constexpr Outside kOutside = Outside::kFill;  // no triangle, empty attributes
+  void fill_outside(int i, int n, int h) const {
+    const int q = p.H[h].offset + i;
+    std::fill(p.tri + q, p.tri + q + n, -1);
+    std::fill(p.pre + q, p.pre + q + n, PixelAttr{0.f, {0.f, 0.f, 0.f}, 0.f});
+    std::fill(p.post + q, p.post + q + n, PixelAttr{0.f, {0.f, 0.f, 0.f}, 0.f});
+  }
   DD_HOST_DEVICE void pixel(int lx, int ly, int i, int h) const {
     const Hypothesis& hy = p.H[h];
     if (i >= hy.w * hy.h) return;
@@ -300,6 +323,11 @@ struct ShadeStage : PixelStage<ShadeStage> {
 /// slot 2 * pixel + dir; `to` is a packed-buffer index.
 struct BlendDetectStage : PixelStage<BlendDetectStage> {
   static constexpr const char* kName = "blend detect";
+  static constexpr Outside kOutside = Outside::kFill;  // both pairs empty: no event
+  void fill_outside(int i, int n, int h) const {
+    const int q = p.H[h].offset + i;
+    std::fill(p.has_event + 2 * q, p.has_event + 2 * (q + n), static_cast<unsigned char>(0));
+  }
   DD_HOST_DEVICE void pixel(int lx, int ly, int i, int h) const {
     const Hypothesis& hy = p.H[h];
     if (i >= hy.w * hy.h) return;
@@ -338,6 +366,7 @@ DD_HOST_DEVICE int event_slots(const Hypothesis& hy, int lx, int ly, int q, int 
 /// i: pixel. Applies the blends that reach it.
 struct BlendApplyStage : PixelStage<BlendApplyStage> {
   static constexpr const char* kName = "blend apply";
+  static constexpr Outside kOutside = Outside::kSkip;  // no blend reaches it
   DD_HOST_DEVICE void pixel(int lx, int ly, int i, int h) const {
     const Hypothesis& hy = p.H[h];
     if (i >= hy.w * hy.h) return;
@@ -471,6 +500,7 @@ struct TextureGatherStage : PixelStage<TextureGatherStage> {
 struct BackwardStage : PixelStage<BackwardStage> {
   static constexpr const char* kName = "backward";
   static constexpr int kValues = 6;
+  static constexpr Outside kOutside = Outside::kSkip;  // no triangle, no blend: nothing to add
   DD_HOST_DEVICE void pixel(int lx, int ly, int i, int h, double* g6) const {
     const Hypothesis& hy = p.H[h];
     if (i >= hy.w * hy.h || !hy.valid) return;

@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 
 #include "diffdope/device.hpp"
+#include "diffdope/procedural.hpp"
 #include "diffdope/refiner.hpp"
 #include "diffdope/synthetic.hpp"
 #include "test_scenes.hpp"
@@ -28,12 +29,21 @@ class Executor : public ::testing::TestWithParam<std::string> {
   }
 };
 
-/// The reference: full frame, one thread.
+/// A CPU renderer whose pixel stages walk every pixel of the regions (DIFFDOPE_EVERY_PIXEL, read when it is
+/// made), not only those near the covered ones.
+std::unique_ptr<Renderer> make_cpu_every_pixel(const RenderOptions& o) {
+  setenv("DIFFDOPE_EVERY_PIXEL", "1", 1);
+  std::unique_ptr<Renderer> r = make_cpu_renderer(o);
+  unsetenv("DIFFDOPE_EVERY_PIXEL");
+  return r;
+}
+
+/// The reference: full frame, one thread, every pixel walked.
 std::unique_ptr<Renderer> make_reference() {
   RenderOptions o;
   o.use_roi = false;
   o.threads = 1;
-  return make_cpu_renderer(o);
+  return make_cpu_every_pixel(o);
 }
 
 struct Case {
@@ -84,6 +94,48 @@ TEST(DeviceSelection, AutoFallsBackCudaFailsClearly) {
   RefinerOptions bad;
   bad.device = "gpu";
   EXPECT_THROW(bad.validate(), std::invalid_argument);
+}
+
+// The CPU executor skips the pixels far from the covered ones in the stages that have nothing to do there
+// (render_stages.hpp, Outside): losses and gradients are bit for bit those of walking every pixel, with every
+// loss term, with and without a mask, on small triangles (the scan-like mesh: most pairs of neighbouring pixels
+// lie on different triangles) and big ones.
+TEST(CpuExecutor, SkippingEmptyPixelsChangesNoBit) {
+  const Camera cam = test_camera();
+  std::vector<Case> cs = cases();
+  cs.push_back({"scan-like", make_scan_like(ScanShape::Bottle, Eigen::Vector3d(0.07, 0.045, 0.19), 15000, 512),
+                look_pose(0.9, 0.5, 0.6, 0.0, 0.0, 0.5), look_pose(0.93, 0.47, 0.63, 0.004, -0.003, 0.505)});
+  auto skipping = make_cpu_renderer();
+  auto every = make_cpu_every_pixel(RenderOptions());
+  for (const Case& c : cs) {
+    Observation obs = observe(*every, cam, c.mesh, c.truth);
+    obs.edges = observed_edges(obs.rgb);
+    obs.texture = observed_texture(obs.rgb, 0.03);
+    LossOptions all_terms;
+    all_terms.weight_edges = all_terms.weight_texture = 1.0;
+    for (bool with_mask : {true, false}) {
+      Observation o = obs;
+      if (!with_mask) o.mask = cv::Mat();
+      const std::vector<Pose> poses = {c.test, c.truth, c.test.updated((Vector6d() << 0.01, 0, 0, 0, 0.1, 0).finished())};
+      for (const LossOptions& loss : {LossOptions(), all_terms}) {
+        std::vector<LossValue> a, b;
+        skipping->evaluate(cam, c.mesh, o, poses, loss, true, a);
+        every->evaluate(cam, c.mesh, o, poses, loss, true, b);
+        for (size_t h = 0; h < poses.size(); ++h) {
+          SCOPED_TRACE(std::string(c.name) + (with_mask ? " mask" : " no mask") + " pose " + std::to_string(h));
+          EXPECT_GT(a[h].total, 0.0);
+          EXPECT_EQ(a[h].total, b[h].total);
+          EXPECT_EQ(a[h].rgb, b[h].rgb);
+          EXPECT_EQ(a[h].depth, b[h].depth);
+          EXPECT_EQ(a[h].mask, b[h].mask);
+          EXPECT_EQ(a[h].edges, b[h].edges);
+          EXPECT_EQ(a[h].texture, b[h].texture);
+          EXPECT_GT(a[h].gradient.norm(), 0.0);
+          for (int k = 0; k < 6; ++k) EXPECT_EQ(a[h].gradient[k], b[h].gradient[k]) << "component " << k;
+        }
+      }
+    }
+  }
 }
 
 TEST_P(Executor, RendersLikeTheReference) {
