@@ -233,12 +233,15 @@ class HostExec {
     };
     // Skipped pixels add exact zeros: the sums are the same.
     bool skip = false;
-    if constexpr (pipeline::outside_of<Stage>::known) {
-      static_assert(Stage::kOutside == pipeline::Outside::kSkip, "a reducing stage fills nothing");
-      skip = near && near->valid;
-    }
+    if constexpr (pipeline::outside_of<Stage>::known) skip = near && near->valid;
     for (int ly = 0; ly < rows; ++ly) {
       const int lo = skip ? near->lo[size_t(ly)] : 0, hi = skip ? near->hi[size_t(ly)] : w - 1;
+      if constexpr (pipeline::outside_of<Stage>::known) {
+        if constexpr (Stage::kOutside == pipeline::Outside::kFill) {
+          if (skip && lo > hi) s.stage.fill_outside(ly * w, w, h);
+          if (skip && lo <= hi) s.stage.fill_outside(ly * w, lo, h), s.stage.fill_outside(ly * w + hi + 1, w - 1 - hi, h);
+        }
+      }
       for (int lx = lo; lx <= hi; ++lx) add(lx, ly, ly * w + lx);
     }
     for (int k = 0; k < Stage::kValues; ++k) s.out[size_t(s.stride) * h_out + k] += sum[k];

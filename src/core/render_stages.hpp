@@ -404,11 +404,15 @@ struct LossStage : PixelStage<LossStage> {
 
 /// Edge and texture terms, stage 1, i: pixel. The render's grey image (mean of the blended colour) and, for the
 /// texture term, its log.
-struct GreyStage {
+struct GreyStage : PixelStage<GreyStage> {
   static constexpr const char* kName = "edges grey";
-  Pipeline p;
-  DD_HOST_DEVICE int count(int h) const { return p.H[h].w * p.H[h].h; }
-  DD_HOST_DEVICE void operator()(int i, int h) const {
+  static constexpr Outside kOutside = Outside::kFill;  // the grey (and log grey) of an empty pixel
+  void fill_outside(int i, int n, int h) const {
+    const int q = p.H[h].offset + i;
+    std::fill(p.grey + q, p.grey + q + n, 0.f);
+    if (p.T) std::fill(p.log_grey + q, p.log_grey + q + n, logf(0.f + p.objects[p.H[h].object].texture_epsilon));
+  }
+  DD_HOST_DEVICE void pixel(int, int, int i, int h) const {
     const Hypothesis& hy = p.H[h];
     if (i >= hy.w * hy.h) return;
     const PixelAttr& a = p.post[hy.offset + i];
@@ -451,6 +455,14 @@ struct EdgeGatherStage : PixelStage<EdgeGatherStage> {
 struct TextureStage : PixelStage<TextureStage> {
   static constexpr const char* kName = "texture";
   static constexpr int kValues = 1;
+  // Empty in its window: weight 0, no value and no gradient.
+  static constexpr Outside kOutside = Outside::kFill;
+  void fill_outside(int i, int n, int h) const {
+    const Hypothesis& hy = p.H[h];
+    if (!hy.valid || p.objects[hy.object].k_texture == 0.f || !p.with_gradient) return;
+    std::fill(p.g_tx + hy.offset + i, p.g_tx + hy.offset + i + n, 0.f);
+    std::fill(p.g_ty + hy.offset + i, p.g_ty + hy.offset + i + n, 0.f);
+  }
   DD_HOST_DEVICE void pixel(int lx, int ly, int i, int h, double* v) const {
     const Hypothesis& hy = p.H[h];
     const ObjectParams& o = p.objects[hy.object];
@@ -484,6 +496,7 @@ struct TextureStage : PixelStage<TextureStage> {
 /// the grey into the pixel's colour gradient.
 struct TextureGatherStage : PixelStage<TextureGatherStage> {
   static constexpr const char* kName = "texture gather";
+  static constexpr Outside kOutside = Outside::kSkip;  // its neighbours' texture gradients are all zero
   DD_HOST_DEVICE void pixel(int lx, int ly, int i, int h) const {
     const Hypothesis& hy = p.H[h];
     const ObjectParams& o = p.objects[hy.object];
