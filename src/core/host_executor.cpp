@@ -182,6 +182,18 @@ class HostExec {
     return out;
   }
 
+  /// A kFill stage's writes for the pixels of a region's row (from `row`, w of them) outside [lo, hi].
+  template <class Stage>
+  static void fill_outside(const Stage& stage, int row, int w, int lo, int hi, int h) {
+    if constexpr (pipeline::outside_of<Stage>::known) {
+      if constexpr (Stage::kOutside == pipeline::Outside::kFill) {
+        if (lo > hi) return stage.fill_outside(row, w, h);
+        stage.fill_outside(row, lo, h);
+        stage.fill_outside(row + hi + 1, w - 1 - hi, h);
+      }
+    }
+  }
+
   /// Runs step s for hypothesis h of its pipeline; sums go to hypothesis h_out's outputs. Stages over the pixels
   /// of a region (kPixels) are walked row by row: no division per pixel; where `near` is valid, those with an
   /// Outside policy only near the covered pixels. The raster's step computes `near` (when given).
@@ -198,14 +210,7 @@ class HostExec {
         if (near && near->valid) {
           for (int ly = 0; ly < rows; ++ly) {
             const int row = ly * w, lo = near->lo[size_t(ly)], hi = near->hi[size_t(ly)];
-            if (lo > hi) {
-              if constexpr (Stage::kOutside == pipeline::Outside::kFill) s.stage.fill_outside(row, w, h);
-              continue;
-            }
-            if constexpr (Stage::kOutside == pipeline::Outside::kFill) {
-              s.stage.fill_outside(row, lo, h);
-              s.stage.fill_outside(row + hi + 1, w - 1 - hi, h);
-            }
+            fill_outside(s.stage, row, w, lo, hi, h);
             for (int lx = lo; lx <= hi; ++lx) s.stage.pixel(lx, ly, row + lx, h);
           }
           return;
@@ -236,12 +241,7 @@ class HostExec {
     if constexpr (pipeline::outside_of<Stage>::known) skip = near && near->valid;
     for (int ly = 0; ly < rows; ++ly) {
       const int lo = skip ? near->lo[size_t(ly)] : 0, hi = skip ? near->hi[size_t(ly)] : w - 1;
-      if constexpr (pipeline::outside_of<Stage>::known) {
-        if constexpr (Stage::kOutside == pipeline::Outside::kFill) {
-          if (skip && lo > hi) s.stage.fill_outside(ly * w, w, h);
-          if (skip && lo <= hi) s.stage.fill_outside(ly * w, lo, h), s.stage.fill_outside(ly * w + hi + 1, w - 1 - hi, h);
-        }
-      }
+      if (skip) fill_outside(s.stage, ly * w, w, lo, hi, h);
       for (int lx = lo; lx <= hi; ++lx) add(lx, ly, ly * w + lx);
     }
     for (int k = 0; k < Stage::kValues; ++k) s.out[size_t(s.stride) * h_out + k] += sum[k];
