@@ -195,7 +195,10 @@ void RefinerNodelet::loadObjects() {
 void RefinerNodelet::setupReconfigure() {
   runtime_settings_ = {mode_, refiner_options_, track_options_, publish_implausible_};
   applied_config_ = to_config(runtime_settings_);
-  // The server starts from the node's own values (YAML, then ~parameters), not from the .cfg defaults.
+  // The server starts from the node's own values (YAML, then ~parameters), not from the .cfg defaults. Its
+  // constructor advertises set_parameters before updateConfig below: holding the server's mutex makes a call that
+  // arrives in between wait, instead of seeing (and applying) the .cfg defaults.
+  boost::recursive_mutex::scoped_lock lock(reconfigure_mutex_);
   reconfigure_server_ =
       std::make_unique<dynamic_reconfigure::Server<RefinerConfig>>(reconfigure_mutex_, getPrivateNodeHandle());
   reconfigure_server_->updateConfig(applied_config_);
