@@ -221,6 +221,7 @@ void RefinerNodelet::onReconfigure(RefinerConfig& config, uint32_t level) {
   {
     std::lock_guard<std::mutex> lock(work_mutex_);
     pending_settings_ = settings;
+    if (settings.mode == Mode::kOnRequest) frame_pending_ = false;  // nothing more is streamed, not even that one
   }
   mode_ = settings.mode;  // the input callbacks read it; the rest the worker takes at its next job
   NODELET_INFO_STREAM("reconfigured: mode " << to_string(settings.mode) << ", " << settings.refiner.batch_size
@@ -536,7 +537,12 @@ bool RefinerNodelet::onRefineService(diffdope_ros::Refine::Request& req, diffdop
 }
 
 void RefinerNodelet::onWatchdog(const ros::WallTimerEvent&) {
-  if (resubscribe_detections_.exchange(false)) subscribeDetectionArray();
+  // Once the publisher of the other type has gone (while it is connected a new subscription would take its type
+  // again, and a publisher of the right one still could not connect).
+  if (resubscribe_detections_ && detection_array_sub_.getNumPublishers() == 0) {
+    resubscribe_detections_ = false;
+    subscribeDetectionArray();
+  }
   // Inputs that arrive but never form a synchronized set (a silent topic, stamps too far apart) are an error.
   const ros::WallTime now = ros::WallTime::now();
   std::unique_lock<std::mutex> lock(arrival_mutex_);

@@ -122,11 +122,18 @@ diffdope::Pose RefinerNodelet::meshPoseInCamera(const geometry_msgs::PoseStamped
   if (source != camera || time_travel) {
     geometry_msgs::TransformStamped t;
     try {
-      const ros::Duration timeout(tf_timeout_);
-      if (!time_travel)
-        t = tf_buffer_->lookupTransform(camera, source, frame.header.stamp, timeout);
+      // Waits ~tf_timeout in wall time: tf2's own timeout sleeps in ROS time, which stands still while a bag
+      // is paused or over (sim time), and the worker would hang there.
+      const auto available = [&] {
+        return !time_travel ? tf_buffer_->canTransform(camera, source, frame.header.stamp)
+                            : tf_buffer_->canTransform(camera, frame.header.stamp, source, pose.header.stamp, fixed_frame_);
+      };
+      const ros::WallTime deadline = ros::WallTime::now() + ros::WallDuration(tf_timeout_);
+      while (!available() && ros::WallTime::now() < deadline && ros::ok()) ros::WallDuration(0.005).sleep();
+      if (!time_travel)  // (throws, saying why, when it is still not there)
+        t = tf_buffer_->lookupTransform(camera, source, frame.header.stamp);
       else  // the detection's frame at its own stamp, through a fixed frame to the camera at the image stamp
-        t = tf_buffer_->lookupTransform(camera, frame.header.stamp, source, pose.header.stamp, fixed_frame_, timeout);
+        t = tf_buffer_->lookupTransform(camera, frame.header.stamp, source, pose.header.stamp, fixed_frame_);
     } catch (const tf2::TransformException& e) {
       throw std::runtime_error(what + ": no transform from '" + source + "' to '" + camera + "' at t=" +
                                format_fixed(frame.header.stamp.toSec()) + ": " + e.what());

@@ -137,18 +137,10 @@ TEST(BagAccuracy, RefinedPosesTfAndScores) {
     if (each_within) {
       EXPECT_EQ(s.within, s.count) << "max error " << 1e3 * s.max_translation_m << " mm, "
                                    << s.max_rotation_rad * 180 / M_PI << " deg";
-    } else {  // detector-seeded frames: refined closer than the detection, on average
-      double init_t = 0, ref_t = 0, init_r = 0, ref_r = 0;
+    } else {  // detector-seeded frames of every object: below, after this loop
       int n = 0;
-      for (const auto& row : rec.checker->rows())
-        if (row.name == o.name && row.source == "detector") {
-          init_t += row.initial.translation_m, ref_t += row.refined.translation_m;
-          init_r += row.initial.rotation_rad, ref_r += row.refined.rotation_rad;
-          ++n;
-        }
-      ASSERT_GT(n, 0);
-      EXPECT_LT(ref_t, init_t);
-      EXPECT_LT(ref_r, init_r);
+      for (const auto& row : rec.checker->rows()) n += row.name == o.name && row.source == "detector";
+      EXPECT_GT(n, 0) << "no detector-seeded frame";
     }
     if (each_within) {
       EXPECT_EQ(s.plausible, s.count);
@@ -181,6 +173,18 @@ TEST(BagAccuracy, RefinedPosesTfAndScores) {
                   1e3 * std::sqrt(k[0]), 1e3 * std::sqrt(k[7]), 1e3 * std::sqrt(k[14]), std::sqrt(k[21]) * 180 / M_PI,
                   std::sqrt(k[28]) * 180 / M_PI, std::sqrt(k[35]) * 180 / M_PI);
     }
+  }
+  if (!each_within) {
+    // Detector-seeded frames, all objects together: refined closer than the detections, on average. (Per object
+    // there may be a single such frame, and RGB alone leaves the distance along the viewing ray loose.)
+    double init_t = 0, ref_t = 0, init_r = 0, ref_r = 0;
+    for (const auto& row : rec.checker->rows())
+      if (row.source == "detector") {
+        init_t += row.initial.translation_m, ref_t += row.refined.translation_m;
+        init_r += row.initial.rotation_rad, ref_r += row.refined.rotation_rad;
+      }
+    EXPECT_LT(ref_t, init_t);
+    EXPECT_LT(ref_r, init_r);
   }
   for (const auto& row : rec.checker->rows()) std::printf("%s\n", diffdope_ros::PoseChecker::formatRow(row).c_str());
   // max_step_deg > 0: an object's consecutive published poses turn by at most this much (the objects move a few

@@ -29,6 +29,7 @@ struct Match {
 struct World {
   std::mutex mutex;
   std::map<int64_t, diffdope_ros::InitialPoseArray> truth;  // by stamp
+  std::vector<diffdope_ros::RefinedPoseArrayConstPtr> arrays;  // as received
   std::vector<std::pair<int, Match>> refined;                // (instance, match) of every plausible result
   int unmatched = 0;                                          // results without ground truth at their stamp
 
@@ -54,13 +55,19 @@ struct World {
   }
   void onRefined(const diffdope_ros::RefinedPoseArrayConstPtr& m) {
     std::lock_guard<std::mutex> l(mutex);
-    for (const auto& r : m->poses) {
-      if (!r.plausible) continue;
-      Match mt = match(r.pose.pose, m->header.stamp);
-      mt.source = r.source;
-      if (mt.truth < 0) ++unmatched;
-      else refined.emplace_back(r.instance, mt);
-    }
+    arrays.push_back(m);
+  }
+  /// The plausible results against the ground truth at their stamps, once the bag has played (a frame's truth
+  /// comes on another connection and may be handled after its result). Call with the mutex held.
+  void matchAll() {
+    for (const auto& m : arrays)
+      for (const auto& r : m->poses) {
+        if (!r.plausible) continue;
+        Match mt = match(r.pose.pose, m->header.stamp);
+        mt.source = r.source;
+        if (mt.truth < 0) ++unmatched;
+        else refined.emplace_back(r.instance, mt);
+      }
   }
 };
 World* world = nullptr;
@@ -77,10 +84,11 @@ TEST(Instances, EachInstanceOnItsOwnBoxWithAStableIndex) {
   while (ros::WallTime::now() < end) {
     ros::WallDuration(0.5).sleep();
     std::lock_guard<std::mutex> l(world->mutex);
-    if (world->refined.size() != last) last = world->refined.size(), quiet_since = ros::WallTime::now();
+    if (world->arrays.size() != last) last = world->arrays.size(), quiet_since = ros::WallTime::now();
     if (last > 0 && ros::WallTime::now() - quiet_since > ros::WallDuration(6.0)) break;  // the bag has ended
   }
   std::lock_guard<std::mutex> l(world->mutex);
+  world->matchAll();
   ASSERT_FALSE(world->refined.empty()) << "nothing refined";
   std::map<int, std::set<int>> truth_of;  // instance -> boxes it was refined onto
   std::map<int, int> results, tracked;

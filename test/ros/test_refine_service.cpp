@@ -64,16 +64,17 @@ struct World {
   }
   /// Checks each result against the ground truth at its own stamp.
   void expectAccurate(const std::vector<diffdope_ros::RefinedPose>& results) {
-    diffdope_ros::PoseChecker checker(0.005, 2.0 * M_PI / 180, symmetric);
+    // The limits of the .test file (PoseChecker::fromParams: 5 mm, 2 degrees unless it names an object).
+    const auto checker = diffdope_ros::PoseChecker::fromParams(ros::NodeHandle("~"), symmetric);
     {
       std::lock_guard<std::mutex> l(mutex);
-      for (const auto& kv : truth) checker.addGroundTruth(kv.second);
+      for (const auto& kv : truth) checker->addGroundTruth(kv.second);
     }
     diffdope_ros::RefinedPoseArray a;
     a.poses = results;
-    const auto rows = checker.addRefined(a);
+    const auto rows = checker->addRefined(a);
     EXPECT_EQ(rows.size(), results.size()) << "results without ground truth at their stamp";
-    for (const auto& r : rows) EXPECT_TRUE(checker.within(r)) << diffdope_ros::PoseChecker::formatRow(r);
+    for (const auto& r : rows) EXPECT_TRUE(checker->within(r)) << diffdope_ros::PoseChecker::formatRow(r);
   }
 };
 World* world = nullptr;
