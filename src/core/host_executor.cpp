@@ -2,8 +2,10 @@
 // runs every stage of a call back to back on one thread; the hypotheses of all objects of the call are spread
 // over the threads. When evaluating, each thread works in its own per-hypothesis arrays, reused from one
 // hypothesis to the next, so they stay in the core's cache between stages and hypotheses (the packed arrays of
-// all hypotheses, tens of MB for B = 32, would stream through memory). One hypothesis' elements run in order
-// on one thread, which is what makes the plain-memory z-buffer minimum and the sums safe here.
+// all hypotheses, tens of MB for B = 32, would stream through memory). A call with fewer hypotheses than
+// threads (a refinement's last runs, its print search and scoring) runs them one at a time instead, each stage
+// split over the threads by elements or rows, the raster excepted: its z-buffer minimum is plain memory, safe
+// only on one thread. Sums are added row by row in row order either way, so results never depend on the split.
 #include <algorithm>
 #include <atomic>
 #include <chrono>
@@ -87,14 +89,23 @@ class HostExec {
   template <class First, class... Steps>
   void run_in_scratch(int B, const First& first, const Steps&... steps) {
     while (scratch_.size() < size_t(pool_.size())) scratch_.push_back(std::make_unique<Scratch>());
+    if (B < pool_.size()) {  // fewer hypotheses than threads: one at a time, each stage over all threads
+      for (int h = 0; h < B; ++h) {
+        Scratch& scratch = *scratch_[0];
+        const pipeline::Pipeline local = scratch.bind(first.stage.p, h);
+        count_hypothesis(local);
+        int k = 0;
+        scratch.rows.valid = false;
+        NearCoverage* near = every_pixel_ ? nullptr : &scratch.rows;
+        split(with_pipeline(first, local), h, k++, near, scratch);
+        (split(with_pipeline(steps, local), h, k++, near, scratch), ...);
+      }
+      return;
+    }
     pool_.parallel_for(B, [&](int h, int worker) {
       Scratch& scratch = *scratch_[size_t(worker)];
       const pipeline::Pipeline local = scratch.bind(first.stage.p, h);
-      if (profile_) {
-        region_pixels_ += int64_t(local.H->w) * local.H->h;
-        triangles_ += local.objects[local.H->object].nt;
-        ++hypotheses_;
-      }
+      count_hypothesis(local);
       int k = 0;
       scratch.rows.valid = false;
       NearCoverage* near = every_pixel_ ? nullptr : &scratch.rows;
@@ -163,6 +174,7 @@ class HostExec {
     pipeline::Hypothesis hy;  // the hypothesis being run, its offsets zero
     pipeline::WorkArrays<HostBuffer> arrays;
     NearCoverage rows;
+    std::vector<double> row_sums;  // a reducing stage's per-row sums, when its rows are split over the threads
 
     /// `p` for hypothesis h of it, as hypothesis 0 of a pipeline whose per-hypothesis arrays are these.
     pipeline::Pipeline bind(const pipeline::Pipeline& p, int h) {
@@ -200,15 +212,37 @@ class HostExec {
   /// flatten: the stage and every kernel it calls are inlined into the loop, so what is invariant over the
   /// elements (the pipeline's pointers, the hypothesis, the mesh view) is loaded once, not once per triangle or
   /// pixel (measured: 7-11 % less time on the scan-like benchmark and dev set).
+  /// Part `part` of `parts` equal slices of [0, n): its first and one-past-last index.
+  static int slice_begin(int n, int part, int parts) { return int(int64_t(n) * part / parts); }
+
+  /// Whether a step may be split over threads (all but the raster, whose z-buffer minimum needs one thread).
   template <class Stage>
-  __attribute__((flatten)) static void step(const pipeline::Each<Stage>& s, int h, int, NearCoverage* near) {
+  static constexpr bool splits(const pipeline::Each<Stage>&) {
+    return !std::is_same<Stage, pipeline::RasterStage>::value;
+  }
+  template <class Stage>
+  static constexpr bool splits(const pipeline::Sum<Stage>&) {
+    return true;
+  }
+
+  /// Runs part `part` of `parts` of step s for hypothesis h of its pipeline (its elements, or for pixel stages
+  /// its rows); sums go to hypothesis h_out's outputs. Stages over the pixels of a region (kPixels) are walked
+  /// row by row: no division per pixel; where `near` is valid, those with an Outside policy only near the
+  /// covered pixels. The raster's step computes `near` (when given).
+  /// flatten: the stage and every kernel it calls are inlined into the loop, so what is invariant over the
+  /// elements (the pipeline's pointers, the hypothesis, the mesh view) is loaded once, not once per triangle or
+  /// pixel (measured: 7-11 % less time on the scan-like benchmark and dev set).
+  template <class Stage>
+  __attribute__((flatten)) static void step(const pipeline::Each<Stage>& s, int h, int, NearCoverage* near,
+                                            int part = 0, int parts = 1, double* = nullptr) {
     const int n = std::min(s.n, s.stage.count(h));
     if (n <= 0) return;
     if constexpr (pipeline::is_pixel_stage<Stage>::value) {
       const int w = s.stage.p.H[h].w, rows = n / w;
+      const int y0 = slice_begin(rows, part, parts), y1 = slice_begin(rows, part + 1, parts);
       if constexpr (pipeline::outside_of<Stage>::known) {
         if (near && near->valid) {
-          for (int ly = 0; ly < rows; ++ly) {
+          for (int ly = y0; ly < y1; ++ly) {
             const int row = ly * w, lo = near->lo[size_t(ly)], hi = near->hi[size_t(ly)];
             fill_outside(s.stage, row, w, lo, hi, h);
             for (int lx = lo; lx <= hi; ++lx) s.stage.pixel(lx, ly, row + lx, h);
@@ -216,35 +250,74 @@ class HostExec {
           return;
         }
       }
-      for (int ly = 0, i = 0; ly < rows; ++ly)
+      for (int ly = y0, i = y0 * w; ly < y1; ++ly)
         for (int lx = 0; lx < w; ++lx, ++i) s.stage.pixel(lx, ly, i, h);
     } else {
-      for (int i = 0; i < n; ++i) s.stage(i, h);
+      for (int i = slice_begin(n, part, parts), end = slice_begin(n, part + 1, parts); i < end; ++i) s.stage(i, h);
       if constexpr (std::is_same<Stage, pipeline::RasterStage>::value)
         if (near) near->compute(s.stage.p, h);
     }
   }
+  /// A reducing step: each row's sum, then the rows' in row order (into `row_sums` when given: the caller adds
+  /// them up in that order once every part is done; else here).
   template <class Stage>
-  __attribute__((flatten)) static void step(const pipeline::Sum<Stage>& s, int h, int h_out, NearCoverage* near) {
+  __attribute__((flatten)) static void step(const pipeline::Sum<Stage>& s, int h, int h_out, NearCoverage* near,
+                                            int part = 0, int parts = 1, double* row_sums = nullptr) {
     static_assert(pipeline::is_pixel_stage<Stage>::value, "reducing stages run over the pixels of the regions");
+    constexpr int K = Stage::kValues;
     const int n = std::min(s.n, s.stage.count(h));
     if (n <= 0) return;
-    double sum[Stage::kValues] = {};
+    double sum[K] = {};
     const int w = s.stage.p.H[h].w, rows = n / w;
-    const auto add = [&](int lx, int ly, int i) {
-      double v[Stage::kValues] = {};
-      s.stage.pixel(lx, ly, i, h, v);
-      for (int k = 0; k < Stage::kValues; ++k) sum[k] += v[k];
-    };
     // Skipped pixels add exact zeros: the sums are the same.
     bool skip = false;
     if constexpr (pipeline::outside_of<Stage>::known) skip = near && near->valid;
-    for (int ly = 0; ly < rows; ++ly) {
+    for (int ly = slice_begin(rows, part, parts), y1 = slice_begin(rows, part + 1, parts); ly < y1; ++ly) {
       const int lo = skip ? near->lo[size_t(ly)] : 0, hi = skip ? near->hi[size_t(ly)] : w - 1;
       if (skip) fill_outside(s.stage, ly * w, w, lo, hi, h);
-      for (int lx = lo; lx <= hi; ++lx) add(lx, ly, ly * w + lx);
+      double row[K] = {};
+      for (int lx = lo; lx <= hi; ++lx) {
+        double v[K] = {};
+        s.stage.pixel(lx, ly, ly * w + lx, h, v);
+        for (int k = 0; k < K; ++k) row[k] += v[k];
+      }
+      for (int k = 0; k < K; ++k) {
+        if (row_sums) row_sums[size_t(ly) * K + k] = row[k];
+        else sum[k] += row[k];
+      }
     }
-    for (int k = 0; k < Stage::kValues; ++k) s.out[size_t(s.stride) * h_out + k] += sum[k];
+    if (!row_sums)
+      for (int k = 0; k < K; ++k) s.out[size_t(s.stride) * h_out + k] += sum[k];
+  }
+
+  /// Step s of hypothesis h (bound to `scratch` as its hypothesis 0) split over all threads, sums added in row
+  /// order as step() adds them on one thread.
+  template <class Step>
+  void split(const Step& s, int h, int k, NearCoverage* near, Scratch& scratch) {
+    const int parts = splits(s) ? pool_.size() : 1;
+    std::atomic<long long> cpu_ns{0};
+    const auto run_part = [&](int part, double* row_sums) {
+      const auto t0 = profile_ ? std::chrono::steady_clock::now() : std::chrono::steady_clock::time_point();
+      step(s, 0, h, near, part, parts, row_sums);
+      if (profile_)
+        cpu_ns += std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now() - t0).count();
+    };
+    using Stage = std::decay_t<decltype(s.stage)>;
+    if constexpr (std::is_same<Step, pipeline::Sum<Stage>>::value) {
+      constexpr int K = Stage::kValues;
+      const int n = std::min(s.n, s.stage.count(0));
+      const int rows = n > 0 ? n / s.stage.p.H[0].w : 0;
+      scratch.row_sums.assign(size_t(rows) * K, 0.0);
+      pool_.parallel_for(parts, [&](int part, int) { run_part(part, scratch.row_sums.data()); });
+      double sum[K] = {};
+      for (int ly = 0; ly < rows; ++ly)
+        for (int j = 0; j < K; ++j) sum[j] += scratch.row_sums[size_t(ly) * K + j];
+      if (rows > 0)
+        for (int j = 0; j < K; ++j) s.out[size_t(s.stride) * h + j] += sum[j];
+    } else {
+      pool_.parallel_for(parts, [&](int part, int) { run_part(part, nullptr); });
+    }
+    if (profile_) add_time(s, k, std::chrono::nanoseconds(cpu_ns.load()));
   }
 
   template <class Step>
@@ -252,11 +325,20 @@ class HostExec {
     if (!profile_) return step(s, h, h_out, near);
     const auto t0 = std::chrono::steady_clock::now();
     step(s, h, h_out, near);
-    const auto ns = std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now() - t0);
+    add_time(s, k, std::chrono::steady_clock::now() - t0);
+  }
+  template <class Step>
+  void add_time(const Step& s, int k, std::chrono::steady_clock::duration took) {
     StageTime& t = times_[size_t(k) % kMaxSteps];
     t.name = decltype(s.stage)::kName;
-    t.ns += ns.count();
+    t.ns += std::chrono::duration_cast<std::chrono::nanoseconds>(took).count();
     ++t.runs;
+  }
+  void count_hypothesis(const pipeline::Pipeline& local) {
+    if (!profile_) return;
+    region_pixels_ += int64_t(local.H->w) * local.H->h;
+    triangles_ += local.objects[local.H->object].nt;
+    ++hypotheses_;
   }
   struct StageTime {
     std::atomic<const char*> name{nullptr};

@@ -5,6 +5,29 @@
 
 namespace diffdope {
 
+namespace {
+void cpu_relax() {
+#if defined(__x86_64__) || defined(__i386__)
+  __builtin_ia32_pause();
+#elif defined(__aarch64__)
+  asm volatile("yield");
+#endif
+}
+
+/// Polls `ready` for up to ThreadPool::kSpin; true as soon as it holds.
+template <class Ready>
+bool spin_until(const Ready& ready) {
+  const auto end = std::chrono::steady_clock::now() + ThreadPool::kSpin;
+  for (;;) {
+    for (int i = 0; i < 64; ++i) {
+      if (ready()) return true;
+      cpu_relax();
+    }
+    if (std::chrono::steady_clock::now() >= end) return ready();
+  }
+}
+}  // namespace
+
 ThreadPool::ThreadPool(int threads) {
   if (threads <= 0) threads = static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
   try {
@@ -48,12 +71,13 @@ void ThreadPool::run_items(int worker) {
 void ThreadPool::worker_loop(int worker) {
   unsigned seen = 0;
   for (;;) {
-    {
+    const auto called = [&] { return stop_ || generation_ != seen; };
+    if (!spin_until(called)) {
       std::unique_lock<std::mutex> lock(mutex_);
-      wake_.wait(lock, [&] { return stop_ || generation_ != seen; });
-      if (stop_) return;
-      seen = generation_;
+      wake_.wait(lock, called);
     }
+    if (stop_) return;
+    seen = generation_;  // (job_ and count_ were written before generation_ changed)
     run_items(worker);
     {
       std::lock_guard<std::mutex> lock(mutex_);
@@ -80,8 +104,14 @@ void ThreadPool::parallel_for(int count, const std::function<void(int, int)>& fn
   }
   wake_.notify_all();
   run_items(0);
-  std::unique_lock<std::mutex> lock(mutex_);
-  done_.wait(lock, [&] { return active_ == 0; });
+  const auto finished = [&] { return active_ == 0; };
+  std::unique_lock<std::mutex> lock(mutex_, std::defer_lock);
+  if (spin_until(finished)) {
+    lock.lock();  // (for error_, written under the mutex)
+  } else {
+    lock.lock();
+    done_.wait(lock, finished);
+  }
   job_ = nullptr;
   if (error_) std::rethrow_exception(error_);
 }

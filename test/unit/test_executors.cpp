@@ -38,6 +38,17 @@ std::unique_ptr<Renderer> make_cpu_every_pixel(const RenderOptions& o) {
   return r;
 }
 
+/// Every loss term and gradient component of a and b equal, bit for bit.
+void expect_same_bits(const LossValue& a, const LossValue& b) {
+  EXPECT_EQ(a.total, b.total);
+  EXPECT_EQ(a.rgb, b.rgb);
+  EXPECT_EQ(a.depth, b.depth);
+  EXPECT_EQ(a.mask, b.mask);
+  EXPECT_EQ(a.edges, b.edges);
+  EXPECT_EQ(a.texture, b.texture);
+  for (int k = 0; k < 6; ++k) EXPECT_EQ(a.gradient[k], b.gradient[k]) << "component " << k;
+}
+
 /// The reference: full frame, one thread, every pixel walked.
 std::unique_ptr<Renderer> make_reference() {
   RenderOptions o;
@@ -124,14 +135,8 @@ TEST(CpuExecutor, SkippingEmptyPixelsChangesNoBit) {
         for (size_t h = 0; h < poses.size(); ++h) {
           SCOPED_TRACE(std::string(c.name) + (with_mask ? " mask" : " no mask") + " pose " + std::to_string(h));
           EXPECT_GT(a[h].total, 0.0);
-          EXPECT_EQ(a[h].total, b[h].total);
-          EXPECT_EQ(a[h].rgb, b[h].rgb);
-          EXPECT_EQ(a[h].depth, b[h].depth);
-          EXPECT_EQ(a[h].mask, b[h].mask);
-          EXPECT_EQ(a[h].edges, b[h].edges);
-          EXPECT_EQ(a[h].texture, b[h].texture);
           EXPECT_GT(a[h].gradient.norm(), 0.0);
-          for (int k = 0; k < 6; ++k) EXPECT_EQ(a[h].gradient[k], b[h].gradient[k]) << "component " << k;
+          expect_same_bits(a[h], b[h]);
         }
       }
     }
@@ -330,6 +335,44 @@ TEST(CpuExecutor, OneThreadGivesWhatTwoGive) {
   for (size_t h = 0; h < poses.size(); ++h) {
     EXPECT_EQ(a[h].total, b[h].total);
     EXPECT_EQ(a[h].gradient, b[h].gradient);
+  }
+}
+
+// Fewer hypotheses than threads: each one's stages are split over the threads (rows, elements). The results
+// are bit for bit those of one thread, with every loss term, with and without a mask, also when the region's
+// rows do not divide evenly, and for a call with as many hypotheses as threads (not split).
+TEST(CpuExecutor, SplittingAHypothesisOverThreadsChangesNoBit) {
+  const Camera cam = test_camera();
+  const Case c{"scan-like", make_scan_like(ScanShape::Bottle, Eigen::Vector3d(0.07, 0.045, 0.19), 15000, 512),
+               look_pose(0.9, 0.5, 0.6, 0.0, 0.0, 0.5), look_pose(0.93, 0.47, 0.63, 0.004, -0.003, 0.505)};
+  RenderOptions one;
+  one.threads = 1;
+  auto single = make_cpu_renderer(one);
+  Observation obs = observe(*single, cam, c.mesh, c.truth);
+  obs.edges = observed_edges(obs.rgb);
+  obs.texture = observed_texture(obs.rgb, 0.03);
+  LossOptions all_terms;
+  all_terms.weight_edges = all_terms.weight_texture = 1.0;
+  for (int threads : {2, 3, 4}) {
+    RenderOptions o;
+    o.threads = threads;
+    auto split = make_cpu_renderer(o);
+    for (bool with_mask : {true, false}) {
+      Observation ob = obs;
+      if (!with_mask) ob.mask = cv::Mat();
+      for (const std::vector<Pose>& poses : {std::vector<Pose>{c.test}, std::vector<Pose>{c.test, c.truth},
+                                             std::vector<Pose>(size_t(threads), c.test)}) {
+        std::vector<LossValue> a, b;
+        single->evaluate(cam, c.mesh, ob, poses, all_terms, true, a);
+        split->evaluate(cam, c.mesh, ob, poses, all_terms, true, b);
+        for (size_t h = 0; h < poses.size(); ++h) {
+          SCOPED_TRACE(std::to_string(threads) + " threads, " + std::to_string(poses.size()) + " poses" +
+                       (with_mask ? ", mask" : ", no mask"));
+          EXPECT_GT(a[h].texture, 0.0);
+          expect_same_bits(a[h], b[h]);
+        }
+      }
+    }
   }
 }
 
