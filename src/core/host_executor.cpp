@@ -206,13 +206,7 @@ class HostExec {
     }
   }
 
-  /// Runs step s for hypothesis h of its pipeline; sums go to hypothesis h_out's outputs. Stages over the pixels
-  /// of a region (kPixels) are walked row by row: no division per pixel; where `near` is valid, those with an
-  /// Outside policy only near the covered pixels. The raster's step computes `near` (when given).
-  /// flatten: the stage and every kernel it calls are inlined into the loop, so what is invariant over the
-  /// elements (the pipeline's pointers, the hypothesis, the mesh view) is loaded once, not once per triangle or
-  /// pixel (measured: 7-11 % less time on the scan-like benchmark and dev set).
-  /// Part `part` of `parts` equal slices of [0, n): its first and one-past-last index.
+  /// Where part `part` of `parts` equal slices of [0, n) begins (part `parts` begins at n).
   static int slice_begin(int n, int part, int parts) { return int(int64_t(n) * part / parts); }
 
   /// Whether a step may be split over threads (all but the raster, whose z-buffer minimum needs one thread).
