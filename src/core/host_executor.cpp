@@ -92,11 +92,9 @@ class HostExec {
     if (B < pool_.size()) {  // fewer hypotheses than threads: one at a time, each stage over all threads
       for (int h = 0; h < B; ++h) {
         Scratch& scratch = *scratch_[0];
-        const pipeline::Pipeline local = scratch.bind(first.stage.p, h);
-        count_hypothesis(local);
-        int k = 0;
-        scratch.rows.valid = false;
+        const pipeline::Pipeline local = start(scratch, first.stage.p, h);
         NearCoverage* near = every_pixel_ ? nullptr : &scratch.rows;
+        int k = 0;
         split(with_pipeline(first, local), h, k++, near, scratch);
         (split(with_pipeline(steps, local), h, k++, near, scratch), ...);
       }
@@ -104,11 +102,9 @@ class HostExec {
     }
     pool_.parallel_for(B, [&](int h, int worker) {
       Scratch& scratch = *scratch_[size_t(worker)];
-      const pipeline::Pipeline local = scratch.bind(first.stage.p, h);
-      count_hypothesis(local);
-      int k = 0;
-      scratch.rows.valid = false;
+      const pipeline::Pipeline local = start(scratch, first.stage.p, h);
       NearCoverage* near = every_pixel_ ? nullptr : &scratch.rows;
+      int k = 0;
       timed(with_pipeline(first, local), 0, h, k++, near);
       (timed(with_pipeline(steps, local), 0, h, k++, near), ...);
     });
@@ -328,11 +324,16 @@ class HostExec {
     t.ns += std::chrono::duration_cast<std::chrono::nanoseconds>(took).count();
     ++t.runs;
   }
-  void count_hypothesis(const pipeline::Pipeline& local) {
-    if (!profile_) return;
-    region_pixels_ += int64_t(local.H->w) * local.H->h;
-    triangles_ += local.objects[local.H->object].nt;
-    ++hypotheses_;
+  /// Hypothesis h of p bound to `scratch` (its coverage spans not yet known), counted for the profile.
+  pipeline::Pipeline start(Scratch& scratch, const pipeline::Pipeline& p, int h) {
+    const pipeline::Pipeline local = scratch.bind(p, h);
+    scratch.rows.valid = false;
+    if (profile_) {
+      region_pixels_ += int64_t(local.H->w) * local.H->h;
+      triangles_ += local.objects[local.H->object].nt;
+      ++hypotheses_;
+    }
+    return local;
   }
   struct StageTime {
     std::atomic<const char*> name{nullptr};

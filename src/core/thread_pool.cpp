@@ -105,13 +105,9 @@ void ThreadPool::parallel_for(int count, const std::function<void(int, int)>& fn
   wake_.notify_all();
   run_items(0);
   const auto finished = [&] { return active_ == 0; };
-  std::unique_lock<std::mutex> lock(mutex_, std::defer_lock);
-  if (spin_until(finished)) {
-    lock.lock();  // (for error_, written under the mutex)
-  } else {
-    lock.lock();
-    done_.wait(lock, finished);
-  }
+  spin_until(finished);
+  std::unique_lock<std::mutex> lock(mutex_);  // (also for error_, written under it)
+  done_.wait(lock, finished);                  // (returns at once when the spin saw the end)
   job_ = nullptr;
   if (error_) std::rethrow_exception(error_);
 }

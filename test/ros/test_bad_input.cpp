@@ -93,15 +93,18 @@ struct Node {
     ++refined_arrays;
   }
 
-  /// Waits until an error containing `needle` was logged (after `from` errors).
+  /// Whether an error containing `needle` was logged.
+  bool sawError(const std::string& needle) {
+    std::lock_guard<std::mutex> l(mutex);
+    for (const auto& e : errors)
+      if (e.find(needle) != std::string::npos) return true;
+    return false;
+  }
+  /// Waits until an error containing `needle` was logged.
   bool waitForError(const std::string& needle, double timeout = 8.0) {
     const ros::WallTime start = ros::WallTime::now();
     while ((ros::WallTime::now() - start).toSec() < timeout) {
-      {
-        std::lock_guard<std::mutex> l(mutex);
-        for (const auto& e : errors)
-          if (e.find(needle) != std::string::npos) return true;
-      }
+      if (sawError(needle)) return true;
       ros::WallDuration(0.05).sleep();
     }
     std::lock_guard<std::mutex> l(mutex);
@@ -131,9 +134,7 @@ struct Node {
       publishGood();
       for (int i = 0; i < 10; ++i) {
         ros::WallDuration(0.1).sleep();
-        std::lock_guard<std::mutex> l(mutex);
-        for (const auto& e : errors)
-          if (e.find(needle) != std::string::npos) return true;
+        if (sawError(needle)) return true;
       }
     }
     return waitForError(needle, 0.5);  // (a last look; fails listing the errors seen)
