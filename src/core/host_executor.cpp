@@ -55,7 +55,8 @@ class HostExec {
     if (!profile_) return;
     double total = 0;
     for (const StageTime& t : times_) total += 1e-6 * t.ns.load();
-    std::fprintf(stderr, "diffdope stage profile (CPU time, all threads): %.1f ms in all\n", total);
+    std::fprintf(stderr, "diffdope stage profile (CPU time, all threads; loss rows on %s): %.1f ms in all\n",
+                 loss_row_target(), total);
     for (const StageTime& t : times_)
       if (t.name.load())
         std::fprintf(stderr, "  %-14s %10.1f ms %5.1f %%  %12lld hypothesis-runs\n", t.name.load(), 1e-6 * t.ns.load(),
@@ -266,10 +267,15 @@ class HostExec {
       const int lo = skip ? near->lo[size_t(ly)] : 0, hi = skip ? near->hi[size_t(ly)] : w - 1;
       if (skip) fill_outside(s.stage, ly * w, w, lo, hi, h);
       double row[K] = {};
-      for (int lx = lo; lx <= hi; ++lx) {
-        double v[K] = {};
-        s.stage.pixel(lx, ly, ly * w + lx, h, v);
-        for (int k = 0; k < K; ++k) row[k] += v[k];
+      if constexpr (pipeline::has_rows<Stage>::value) {
+        static_assert(!pipeline::outside_of<Stage>::known, "a stage by rows runs over whole rows");
+        s.stage.row(ly, h, row);
+      } else {
+        for (int lx = lo; lx <= hi; ++lx) {
+          double v[K] = {};
+          s.stage.pixel(lx, ly, ly * w + lx, h, v);
+          for (int k = 0; k < K; ++k) row[k] += v[k];
+        }
       }
       for (int k = 0; k < K; ++k) {
         if (row_sums) row_sums[size_t(ly) * K + k] = row[k];

@@ -18,6 +18,9 @@
 #include "diffdope/kernels/shade.hpp"
 #include "diffdope/kernels/silhouette.hpp"
 #include "diffdope/kernels/vertex_stage.hpp"
+#if !defined(__CUDACC__)
+#include "simd_loss.hpp"
+#endif
 
 namespace diffdope {
 namespace pipeline {
@@ -45,6 +48,17 @@ struct is_pixel_stage {
 template <class Stage>
 struct is_pixel_stage<Stage, decltype(void(Stage::kPixels))> {
   static constexpr bool value = Stage::kPixels;
+};
+
+/// Whether a reducing pixel stage also runs a whole row of its region at once (row(ly, h, v): the same sums as
+/// pixel() on each pixel of the row in order), which the CPU executor then calls.
+template <class Stage, class = void>
+struct has_rows {
+  static constexpr bool value = false;
+};
+template <class Stage>
+struct has_rows<Stage, decltype(void(Stage::kRows))> {
+  static constexpr bool value = Stage::kRows;
 };
 
 /// One object of a call: its mesh on the executor and, when evaluating, its loss constants and mask.
@@ -400,6 +414,19 @@ struct LossStage : PixelStage<LossStage> {
     v[0] = r.rgb, v[1] = r.depth, v[2] = r.mask;
     if (p.with_gradient) p.g_post[q] = PixelAttr{g.cov, {g.c[0], g.c[1], g.c[2]}, g.d};
   }
+#if !defined(__CUDACC__)
+  static constexpr bool kRows = true;
+  /// Row ly of h's region at once, SIMD on the host (simd_loss.hpp): adds to v what pixel() adds pixel by pixel.
+  void row(int ly, int h, double* v) const {
+    const Hypothesis& hy = p.H[h];
+    if (!hy.valid || ly >= hy.h) return;
+    const ObjectParams& o = p.objects[hy.object];
+    const int q = hy.offset + ly * hy.w, pix = (hy.y0 + ly) * p.image_w + hy.x0;
+    const LossRow r{o.P, p.post + q, o.S ? o.S + pix : nullptr, p.I ? p.I + 3 * pix : nullptr,
+                    p.D ? p.D + pix : nullptr, p.with_gradient ? p.g_post + q : nullptr, hy.w};
+    loss_row(r, v);
+  }
+#endif
 };
 
 /// Edge and texture terms, stage 1, i: pixel. The render's grey image (mean of the blended colour) and, for the

@@ -10,6 +10,7 @@
 //          empty there (without this, occluders push the object away).
 // An observed object pixel (S > 0) that the render does not cover costs the "miss" value, so holes and
 // uncovered pixels never compare against a meaningless background colour or depth.
+#include "diffdope/kernels/lanes.hpp"
 #include "diffdope/kernels/vec.hpp"
 
 namespace diffdope {
@@ -33,49 +34,29 @@ struct PixelLossGrad {
   float d;
 };
 
+/// What pixel_loss_lanes() gives for L::V's pixels at once: pixel_loss()'s values and gradient.
+template <class L>
+struct PixelLossLanes {
+  typename L::V rgb, depth, mask;     // unscaled per-pixel terms
+  typename L::V g_cov, g_c[3], g_d;   // derivatives of the scaled total
+};
+
+/// pixel_loss() over a lane type: every per-pixel condition is a select(), in the order the formula above states
+/// them. `depth_valid` as pixel_loss()'s.
+#include "diffdope/kernels/pixel_loss_lanes.inc"
+
+/// One pixel: pixel_loss_lanes() on ScalarLanes. `g` (optional) receives the derivatives.
 DD_HOST_DEVICE PixelLossValue pixel_loss(const PixelLossParams& P, float S, const float I[3], float Id,
                                          bool depth_valid, float cov, const float C[3], float D,
                                          PixelLossGrad* g) {
-  PixelLossValue v{0.f, 0.f, 0.f};
-  if (g) *g = PixelLossGrad{0.f, {0.f, 0.f, 0.f}, 0.f};
-  if (S > 0.f && P.k_rgb != 0.f) {
-    float sum = 0.f, gcov = 0.f;
-    for (int ch = 0; ch < 3; ++ch) {
-      const float a = cov * I[ch] - C[ch];
-      sum += fabsf(a);
-      const float sg = signf(a);
-      if (g) g->c[ch] -= P.k_rgb * S * sg / 3.f;
-      gcov += sg * I[ch];
-    }
-    v.rgb = S * (sum / 3.f + (1.f - cov) * P.rgb_miss);
-    if (g) g->cov += P.k_rgb * S * (gcov / 3.f - P.rgb_miss);
-  }
-  if (S > 0.f && depth_valid && P.k_depth != 0.f) {
-    const float tau = P.depth_trunc;
-    const float a = cov * Id - D;
-    const float aa = fabsf(a);
-    if (aa < cov * tau) {
-      v.depth = S * (aa + (1.f - cov) * tau) / tau;
-      if (g) {
-        g->d -= P.k_depth * S * signf(a) / tau;
-        g->cov += P.k_depth * S * (signf(a) * Id - tau) / tau;
-      }
-    } else {
-      v.depth = S;  // saturated: cov*tau + (1-cov)*tau = tau
-    }
-  }
-  const bool occluded = P.occlusion_margin > 0.f && S < 0.5f && depth_valid && cov > 0.f &&
-                        Id * cov < D - P.occlusion_margin * cov;  // Id < D / cov - margin
-  if (P.k_mask != 0.f && !occluded) {
-    const float a = S - cov;
-    v.mask = fabsf(a);
-    if (g) g->cov -= P.k_mask * signf(a);
-  }
-  return v;
+  const PixelLossLanes<ScalarLanes> r = pixel_loss_lanes<ScalarLanes>(P, S, I, Id, depth_valid, cov, C, D);
+  if (g) *g = PixelLossGrad{r.g_cov, {r.g_c[0], r.g_c[1], r.g_c[2]}, r.g_d};
+  return PixelLossValue{r.rgb, r.depth, r.mask};
 }
 
 /// One pixel of the loss pass, as both backends run it: observed background the render does not touch costs
-/// nothing (and has no gradient); anything else goes through pixel_loss. Id <= 0 means no depth reading.
+/// nothing (and has no gradient; pixel_loss() gives the same zeros there); anything else goes through
+/// pixel_loss. Id <= 0 means no depth reading.
 DD_HOST_DEVICE PixelLossValue pixel_loss_step(const PixelLossParams& P, float S, const float I[3], float Id,
                                               float cov, const float C[3], float D, PixelLossGrad* g) {
   if (S == 0.f && cov == 0.f) {
