@@ -267,15 +267,15 @@ class HostExec {
       const int lo = skip ? near->lo[size_t(ly)] : 0, hi = skip ? near->hi[size_t(ly)] : w - 1;
       if (skip) fill_outside(s.stage, ly * w, w, lo, hi, h);
       double row[K] = {};
+      int lx = lo;
       if constexpr (pipeline::has_rows<Stage>::value) {
         static_assert(!pipeline::outside_of<Stage>::known, "a stage by rows runs over whole rows");
-        s.stage.row(ly, h, row);
-      } else {
-        for (int lx = lo; lx <= hi; ++lx) {
-          double v[K] = {};
-          s.stage.pixel(lx, ly, ly * w + lx, h, v);
-          for (int k = 0; k < K; ++k) row[k] += v[k];
-        }
+        lx = s.stage.row(ly, h, row);
+      }
+      for (; lx <= hi; ++lx) {
+        double v[K] = {};
+        s.stage.pixel(lx, ly, ly * w + lx, h, v);
+        for (int k = 0; k < K; ++k) row[k] += v[k];
       }
       for (int k = 0; k < K; ++k) {
         if (row_sums) row_sums[size_t(ly) * K + k] = row[k];

@@ -50,8 +50,9 @@ struct is_pixel_stage<Stage, decltype(void(Stage::kPixels))> {
   static constexpr bool value = Stage::kPixels;
 };
 
-/// Whether a reducing pixel stage also runs a whole row of its region at once (row(ly, h, v): the same sums as
-/// pixel() on each pixel of the row in order), which the CPU executor then calls.
+/// Whether a reducing pixel stage also runs the start of a row of its region at once (row(ly, h, v) returns how
+/// many pixels it did, with the same sums as pixel() on each of them in order), which the CPU executor then calls
+/// before it walks the rest.
 template <class Stage, class = void>
 struct has_rows {
   static constexpr bool value = false;
@@ -416,15 +417,16 @@ struct LossStage : PixelStage<LossStage> {
   }
 #if !defined(__CUDACC__)
   static constexpr bool kRows = true;
-  /// Row ly of h's region at once, SIMD on the host (simd_loss.hpp): adds to v what pixel() adds pixel by pixel.
-  void row(int ly, int h, double* v) const {
+  /// Row ly of h's region, SIMD on the host (simd_loss.hpp): adds to v what pixel() adds pixel by pixel for the
+  /// row's first pixels, and returns how many it did (pixel() does the rest).
+  int row(int ly, int h, double* v) const {
     const Hypothesis& hy = p.H[h];
-    if (!hy.valid || ly >= hy.h) return;
+    if (!hy.valid) return hy.w;  // (pixel() adds nothing there)
     const ObjectParams& o = p.objects[hy.object];
     const int q = hy.offset + ly * hy.w, pix = (hy.y0 + ly) * p.image_w + hy.x0;
     const LossRow r{o.P, p.post + q, o.S ? o.S + pix : nullptr, p.I ? p.I + 3 * pix : nullptr,
                     p.D ? p.D + pix : nullptr, p.with_gradient ? p.g_post + q : nullptr, hy.w};
-    loss_row(r, v);
+    return loss_row(r, v);
   }
 #endif
 };

@@ -16,9 +16,10 @@ struct LossRow {
   int n;
 };
 
-/// Adds each pixel's (rgb, depth, mask) terms to sum[0..2] as doubles, one pixel after the other in order: the
-/// same sums as adding pixel_loss_step()'s values pixel by pixel.
-void loss_row(const LossRow& row, double sum[3]);
+/// Runs the row's first pixels, as many as fill whole vectors, and returns how many. Adds each one's (rgb, depth,
+/// mask) terms to sum[0..2] as doubles, one pixel after the other in order: the same sums as adding
+/// pixel_loss_step()'s values pixel by pixel. The caller does the rest of the row one pixel at a time.
+int loss_row(const LossRow& row, double sum[3]);
 
 /// The instruction set loss_row() runs on here (e.g. "AVX3", "AVX2", "SSE4"; for the profile and the README).
 const char* loss_row_target();
