@@ -55,8 +55,8 @@ class HostExec {
     if (!profile_) return;
     double total = 0;
     for (const StageTime& t : times_) total += 1e-6 * t.ns.load();
-    std::fprintf(stderr, "diffdope stage profile (CPU time, all threads; loss rows on %s): %.1f ms in all\n",
-                 loss_row_target(), total);
+    std::fprintf(stderr, "diffdope stage profile (CPU time, all threads; SIMD rows on %s): %.1f ms in all\n",
+                 simd_row_target(), total);
     for (const StageTime& t : times_)
       if (t.name.load())
         std::fprintf(stderr, "  %-14s %10.1f ms %5.1f %%  %12lld hypothesis-runs\n", t.name.load(), 1e-6 * t.ns.load(),
@@ -206,6 +206,13 @@ class HostExec {
   /// Where part `part` of `parts` equal slices of [0, n) begins (part `parts` begins at n).
   static int slice_begin(int n, int part, int parts) { return int(int64_t(n) * part / parts); }
 
+  /// How many pixels of span [lo, hi] of row ly a stage by rows did at once (0 for the others).
+  template <class Stage>
+  static int first_by_rows(const Stage& stage, int ly, int lo, int hi, int h) {
+    if constexpr (pipeline::has_rows<Stage>::value) return lo <= hi ? stage.row(ly, lo, hi, h) : 0;
+    return 0;
+  }
+
   /// Whether a step may be split over threads (all but the raster, whose z-buffer minimum needs one thread).
   template <class Stage>
   static constexpr bool splits(const pipeline::Each<Stage>&) {
@@ -236,13 +243,13 @@ class HostExec {
           for (int ly = y0; ly < y1; ++ly) {
             const int row = ly * w, lo = near->lo[size_t(ly)], hi = near->hi[size_t(ly)];
             fill_outside(s.stage, row, w, lo, hi, h);
-            for (int lx = lo; lx <= hi; ++lx) s.stage.pixel(lx, ly, row + lx, h);
+            for (int lx = lo + first_by_rows(s.stage, ly, lo, hi, h); lx <= hi; ++lx) s.stage.pixel(lx, ly, row + lx, h);
           }
           return;
         }
       }
-      for (int ly = y0, i = y0 * w; ly < y1; ++ly)
-        for (int lx = 0; lx < w; ++lx, ++i) s.stage.pixel(lx, ly, i, h);
+      for (int ly = y0; ly < y1; ++ly)
+        for (int lx = first_by_rows(s.stage, ly, 0, w - 1, h); lx < w; ++lx) s.stage.pixel(lx, ly, ly * w + lx, h);
     } else {
       for (int i = slice_begin(n, part, parts), end = slice_begin(n, part + 1, parts); i < end; ++i) s.stage(i, h);
       if constexpr (std::is_same<Stage, pipeline::RasterStage>::value)
@@ -268,10 +275,7 @@ class HostExec {
       if (skip) fill_outside(s.stage, ly * w, w, lo, hi, h);
       double row[K] = {};
       int lx = lo;
-      if constexpr (pipeline::has_rows<Stage>::value) {
-        static_assert(!pipeline::outside_of<Stage>::known, "a stage by rows runs over whole rows");
-        lx = s.stage.row(ly, h, row);
-      }
+      if constexpr (pipeline::has_rows<Stage>::value) lx += s.stage.row(ly, lo, hi, h, row);
       for (; lx <= hi; ++lx) {
         double v[K] = {};
         s.stage.pixel(lx, ly, ly * w + lx, h, v);

@@ -19,7 +19,7 @@
 #include "diffdope/kernels/silhouette.hpp"
 #include "diffdope/kernels/vertex_stage.hpp"
 #if !defined(__CUDACC__)
-#include "simd_loss.hpp"
+#include "simd_rows.hpp"
 #endif
 
 namespace diffdope {
@@ -50,9 +50,9 @@ struct is_pixel_stage<Stage, decltype(void(Stage::kPixels))> {
   static constexpr bool value = Stage::kPixels;
 };
 
-/// Whether a reducing pixel stage also runs the start of a row of its region at once (row(ly, h, v) returns how
-/// many pixels it did, with the same sums as pixel() on each of them in order), which the CPU executor then calls
-/// before it walks the rest.
+/// Whether a pixel stage also runs the start of a span of a row at once, SIMD on the host: row(ly, lo, hi, h[, v])
+/// does pixels lo, lo + 1, ... of row ly as pixel() does each (writes, and sums added in order) and returns how
+/// many; the CPU executor calls it before it walks the rest of the span [lo, hi].
 template <class Stage, class = void>
 struct has_rows {
   static constexpr bool value = false;
@@ -332,6 +332,16 @@ struct ShadeStage : PixelStage<ShadeStage> {
     p.pre[q] = a;
     p.post[q] = a;
   }
+#if !defined(__CUDACC__)
+  static constexpr bool kRows = true;
+  int row(int ly, int lo, int hi, int h) const {
+    const Hypothesis& hy = p.H[h];
+    const int q = hy.offset + ly * hy.w + lo;
+    const ShadeRow r{p.objects[hy.object].M, projected(p, hy), p.K, p.key + q, p.tri + q, p.pre + q, p.post + q,
+                     p.bary + q, hy.x0 + lo, float(hy.y0 + ly), hi - lo + 1};
+    return shade_row(r);
+  }
+#endif
 };
 
 /// i: pixel. The discontinuity between the pixel and its right (dir 0) / lower (dir 1) neighbour, if any, into
@@ -417,15 +427,13 @@ struct LossStage : PixelStage<LossStage> {
   }
 #if !defined(__CUDACC__)
   static constexpr bool kRows = true;
-  /// Row ly of h's region, SIMD on the host (simd_loss.hpp): adds to v what pixel() adds pixel by pixel for the
-  /// row's first pixels, and returns how many it did (pixel() does the rest).
-  int row(int ly, int h, double* v) const {
+  int row(int ly, int lo, int hi, int h, double* v) const {
     const Hypothesis& hy = p.H[h];
-    if (!hy.valid) return hy.w;  // (pixel() adds nothing there)
+    if (!hy.valid) return hi - lo + 1;  // (pixel() adds nothing there)
     const ObjectParams& o = p.objects[hy.object];
-    const int q = hy.offset + ly * hy.w, pix = (hy.y0 + ly) * p.image_w + hy.x0;
+    const int q = hy.offset + ly * hy.w + lo, pix = (hy.y0 + ly) * p.image_w + hy.x0 + lo;
     const LossRow r{o.P, p.post + q, o.S ? o.S + pix : nullptr, p.I ? p.I + 3 * pix : nullptr,
-                    p.D ? p.D + pix : nullptr, p.with_gradient ? p.g_post + q : nullptr, hy.w};
+                    p.D ? p.D + pix : nullptr, p.with_gradient ? p.g_post + q : nullptr, hi - lo + 1};
     return loss_row(r, v);
   }
 #endif

@@ -141,26 +141,7 @@ DD_HOST_DEVICE float raster_inverse_depth(const TriangleRaster& r, long long e0,
   return (float(e0) * r.iz[0] + float(e1) * r.iz[1] + float(e2) * r.iz[2]) * r.inv2a;
 }
 
-/// Perspective-correct barycentrics of the intersection of viewing ray d with the camera-space triangle
-/// (X0, X1, X2). c_i = d . (X_j x X_k) is proportional to the volume spanned by d and the opposite edge,
-/// so b_i = c_i / sum(c) are exactly the 3-D barycentrics of the hit point. Returns sum(c) (0: edge-on).
-DD_HOST_DEVICE float ray_barycentrics(Vec3f d, Vec3f X0, Vec3f X1, Vec3f X2, float b[3]) {
-  const float c0 = dot(d, cross(X1, X2));
-  const float c1 = dot(d, cross(X2, X0));
-  const float c2 = dot(d, cross(X0, X1));
-  const float s = c0 + c1 + c2;
-  if (s == 0.f) {
-    b[0] = b[1] = b[2] = 1.f / 3.f;
-    return 0.f;
-  }
-  const float is = 1.f / s;
-  b[0] = c0 * is;
-  b[1] = c1 * is;
-  b[2] = c2 * is;
-  return s;
-}
-
-/// Backward of ray_barycentrics: given dL/db (g_b) and the forward's b and s, adds dL/dX_i into g_X[i].
+/// Backward of ray_barycentrics_lanes (shade_lanes.inc): given dL/db (g_b) and the forward's b and s, adds dL/dX_i into g_X[i].
 DD_HOST_DEVICE void ray_barycentrics_backward(Vec3f d, const Vec3f X[3], const float b[3], float s,
                                               const float g_b[3], Vec3f g_X[3]) {
   if (s == 0.f) return;

@@ -8,6 +8,9 @@
 
 namespace diffdope {
 
+/// The shading over a lane type (ray_barycentrics_lanes, shade_surface_lanes).
+#include "diffdope/kernels/shade_lanes.inc"
+
 namespace detail {
 /// Barycentrics used for shading (raw or clamped) plus what the backward pass needs: the texture's derivatives
 /// at the sampled UV (kept by the forward pass, so the backward pass does not sample the texture again).
@@ -18,7 +21,9 @@ struct ShadeBary {
 };
 DD_HOST_DEVICE ShadeBary shade_barycentrics(Vec3f d, const Vec3f X[3], bool clamp) {
   ShadeBary r;
-  r.s = ray_barycentrics(d, X[0], X[1], X[2], r.raw);
+  const float dv[3] = {d.x, d.y, d.z};
+  const float X0[3] = {X[0].x, X[0].y, X[0].z}, X1[3] = {X[1].x, X[1].y, X[1].z}, X2[3] = {X[2].x, X[2].y, X[2].z};
+  r.s = ray_barycentrics_lanes<ScalarLanes>(dv, X0, X1, X2, r.raw);
   r.clamped = clamp && (r.raw[0] < 0.f || r.raw[1] < 0.f || r.raw[2] < 0.f) && clamp_barycentrics(r.raw, r.b);
   if (!r.clamped) r.b[0] = r.raw[0], r.b[1] = r.raw[1], r.b[2] = r.raw[2];
   r.dcdu = r.dcdv = Vec3f{0.f, 0.f, 0.f};
@@ -34,17 +39,15 @@ DD_HOST_DEVICE void shade_pixel(const MeshView& M, const ProjectedView& G, const
   const int* v = M.triangles + 3 * tri;
   const Vec3f X[3] = {G.cam[v[0]], G.cam[v[1]], G.cam[v[2]]};
   detail::ShadeBary sb = detail::shade_barycentrics(pixel_ray(K, px, py), X, clamp);
-  const float* b = sb.b;
-  *depth = b[0] * X[0].z + b[1] * X[1].z + b[2] * X[2].z;
-  const int tex = M.tri_texture[tri];
-  if (tex >= 0 && M.uvs) {
-    const Vec2f uv = b[0] * M.uvs[v[0]] + b[1] * M.uvs[v[1]] + b[2] * M.uvs[v[2]];
-    *colour = sample_trilinear(M.textures[tex], G.tri_level[tri], uv, bary_out ? &sb.dcdu : nullptr,
-                               bary_out ? &sb.dcdv : nullptr);
-    if (bary_out) *bary_out = sb;
-  } else {
-    if (bary_out) *bary_out = sb;
-    *colour = b[0] * M.colors[v[0]] + b[1] * M.colors[v[1]] + b[2] * M.colors[v[2]];
+  const int vi[3] = {v[0], v[1], v[2]};
+  const float z[3] = {X[0].z, X[1].z, X[2].z};
+  float c[3], du[3], dv[3];
+  shade_surface_lanes<ScalarLanes>(M, G, tri, vi, sb.b, z, depth, c, du, dv);
+  *colour = Vec3f{c[0], c[1], c[2]};
+  if (bary_out) {
+    sb.dcdu = Vec3f{du[0], du[1], du[2]};
+    sb.dcdv = Vec3f{dv[0], dv[1], dv[2]};
+    *bary_out = sb;
   }
 }
 

@@ -1,0 +1,221 @@
+// loss_row() and shade_row() for every instruction set Highway targets, one chosen at run time (foreach_target.h
+// compiles this file once per target). Built without FMA contraction (CMakeLists.txt), so each lane computes what
+// the one-pixel kernels compute, bit for bit.
+#undef HWY_TARGET_INCLUDE
+#define HWY_TARGET_INCLUDE "simd_rows.cpp"
+#include <hwy/foreach_target.h>  // IWYU pragma: keep
+#include <hwy/highway.h>
+
+#include <algorithm>
+
+#include "simd_rows.hpp"
+
+HWY_BEFORE_NAMESPACE();
+namespace diffdope {
+namespace HWY_NAMESPACE {
+namespace hn = hwy::HWY_NAMESPACE;
+
+using DF = hn::ScalableTag<float>;
+using DI = hn::RebindToSigned<DF>;
+
+/// The lane type of lanes.hpp on this target's float vectors.
+struct HwyLanes {
+  using V = hn::Vec<DF>;
+  using M = hn::Mask<DF>;
+  static V set(float x) { return hn::Set(DF(), x); }
+  static V zero() { return hn::Zero(DF()); }
+  static V abs(V a) { return hn::Abs(a); }
+  static M lt(V a, V b) { return hn::Lt(a, b); }
+  static M gt(V a, V b) { return hn::Gt(a, b); }
+  static M le(V a, V b) { return hn::Le(a, b); }
+  static M eq(V a, V b) { return hn::Eq(a, b); }
+  static M both(M a, M b) { return hn::And(a, b); }
+  static M either(M a, M b) { return hn::Or(a, b); }
+  static M negate(M a) { return hn::Not(a); }
+  static bool any(M a) { return !hn::AllFalse(DF(), a); }
+  static M uniform(bool b) { return hn::Eq(zero(), set(b ? 0.f : 1.f)); }
+  static V select(M m, V a, V b) { return hn::IfThenElse(m, a, b); }
+  static V sign(V a) {
+    return hn::IfThenElse(hn::Gt(a, zero()), set(1.f), hn::IfThenElse(hn::Lt(a, zero()), set(-1.f), zero()));
+  }
+
+  using I = hn::Vec<DI>;
+  static I seti(int x) { return hn::Set(DI(), x); }
+  static M lti(I a, I b) { return hn::RebindMask(DF(), hn::Lt(a, b)); }
+  static I selecti(M m, I a, I b) { return hn::IfThenElse(hn::RebindMask(DI(), m), a, b); }
+  static V to_float(I a) { return hn::ConvertTo(DF(), a); }
+  static I truncate(V a) { return hn::ConvertTo(DI(), a); }
+  static V gather(const float* base, I i) { return hn::GatherIndex(DF(), base, i); }
+  static I gather(const int* base, I i) { return hn::GatherIndex(DI(), base, i); }
+
+  // Texture levels differ per lane (each lane's triangle has its own texture and mip level): per-lane pointers,
+  // and texels read one lane at a time (the levels are separate arrays, out of reach of one gather's base).
+  static constexpr size_t kMaxLanes = hn::MaxLanes(DF());
+  struct Level {
+    const float* rgb[kMaxLanes];
+    I w, h;
+  };
+  static Level level(const TextureView* textures, I tex, I lv) {
+    HWY_ALIGN int t[kMaxLanes], l[kMaxLanes], w[kMaxLanes], h[kMaxLanes];
+    hn::Store(tex, DI(), t);
+    hn::Store(lv, DI(), l);
+    Level out;
+    for (size_t j = 0; j < hn::Lanes(DF()); ++j) {
+      const TextureLevelView& v = textures[t[j]].level[l[j]];
+      out.rgb[j] = v.rgb, w[j] = v.width, h[j] = v.height;
+    }
+    out.w = hn::Load(DI(), w);
+    out.h = hn::Load(DI(), h);
+    return out;
+  }
+  static I levels(const TextureView* textures, I tex) {
+    HWY_ALIGN int t[kMaxLanes];
+    hn::Store(tex, DI(), t);
+    for (size_t j = 0; j < hn::Lanes(DF()); ++j) t[j] = textures[t[j]].levels;
+    return hn::Load(DI(), t);
+  }
+  static I width(const Level& l) { return l.w; }
+  static I height(const Level& l) { return l.h; }
+  static void texel(const Level& l, I i, V rgb[3]) {
+    HWY_ALIGN int idx[kMaxLanes];
+    HWY_ALIGN float r[kMaxLanes], g[kMaxLanes], b[kMaxLanes];
+    hn::Store(i, DI(), idx);
+    for (size_t j = 0; j < hn::Lanes(DF()); ++j) {
+      const float* p = l.rgb[j] + 3 * idx[j];
+      r[j] = p[0], g[j] = p[1], b[j] = p[2];
+    }
+    rgb[0] = hn::Load(DF(), r), rgb[1] = hn::Load(DF(), g), rgb[2] = hn::Load(DF(), b);
+  }
+};
+
+// The kernels built for this target (their definitions must lie inside the target's region).
+#include "diffdope/kernels/pixel_loss_lanes.inc"
+#include "diffdope/kernels/texture_lanes.inc"
+#include "diffdope/kernels/shade_lanes.inc"
+
+int LossRowImpl(const LossRow& r, double* sum) {
+  const DF d;
+  const DI di;
+  constexpr int kFields = sizeof(PixelAttr) / sizeof(float);
+  static_assert(sizeof(PixelAttr) == kFields * sizeof(float), "PixelAttr is floats only");
+  const size_t N = hn::Lanes(d);
+  const auto field_index = hn::Mul(hn::Iota(di, 0), hn::Set(di, kFields));  // lane j: float j * kFields
+  HWY_ALIGN float rgb[hn::MaxLanes(d)], depth[hn::MaxLanes(d)], mask[hn::MaxLanes(d)];
+  using V = HwyLanes::V;
+  int x = 0;
+  for (; x + int(N) <= r.n; x += int(N)) {
+    const float* post = &r.post[x].cov;
+    const V cov = hn::GatherIndex(d, post, field_index);
+    const V C[3] = {hn::GatherIndex(d, post + 1, field_index), hn::GatherIndex(d, post + 2, field_index),
+                    hn::GatherIndex(d, post + 3, field_index)};
+    const V D = hn::GatherIndex(d, post + 4, field_index);
+    const V S = r.S ? hn::LoadU(d, r.S + x) : hn::Set(d, 1.f);
+    V I[3] = {hn::Zero(d), hn::Zero(d), hn::Zero(d)};
+    if (r.I) hn::LoadInterleaved3(d, r.I + 3 * x, I[0], I[1], I[2]);
+    const V Id = r.D ? hn::LoadU(d, r.D + x) : hn::Zero(d);
+    const PixelLossLanes<HwyLanes> v = HWY_NAMESPACE::pixel_loss_lanes<HwyLanes>(r.P, S, I, Id, hn::Gt(Id, hn::Zero(d)), cov, C, D);
+    if (r.g_post) {
+      float* g = &r.g_post[x].cov;
+      hn::ScatterIndex(v.g_cov, d, g, field_index);
+      for (int ch = 0; ch < 3; ++ch) hn::ScatterIndex(v.g_c[ch], d, g + 1 + ch, field_index);
+      hn::ScatterIndex(v.g_d, d, g + 4, field_index);
+    }
+    hn::Store(v.rgb, d, rgb);
+    hn::Store(v.depth, d, depth);
+    hn::Store(v.mask, d, mask);
+    for (size_t j = 0; j < N; ++j) {
+      sum[0] += double(rgb[j]);
+      sum[1] += double(depth[j]);
+      sum[2] += double(mask[j]);
+    }
+  }
+  return x;
+}
+
+int ShadeRowImpl(const ShadeRow& r) {
+  const DF d;
+  const DI di;
+  using V = HwyLanes::V;
+  using I = HwyLanes::I;
+  constexpr size_t kMax = HwyLanes::kMaxLanes;
+  const int N = int(hn::Lanes(d));
+  const PixelAttr empty{0.f, {0.f, 0.f, 0.f}, 0.f};
+  const V ray_y = hn::Set(d, (r.y - r.K.cy) / r.K.fy);  // pixel_ray()'s, the same for the whole row
+  HWY_ALIGN int tri[kMax];
+  HWY_ALIGN float b[3][kMax], s[kMax], depth[kMax], c[3][kMax], du[3][kMax], dv[3][kMax];
+  int x = 0;
+  for (; x + N <= r.n; x += N) {
+    bool any = false;
+    for (int j = 0; j < N; ++j) {
+      const unsigned long long k = r.key[x + j];
+      tri[j] = k == ~0ull ? -1 : int(k & 0xffffffffu);
+      r.tri[x + j] = tri[j];
+      any |= tri[j] >= 0;
+    }
+    if (!any) {
+      std::fill(r.pre + x, r.pre + x + N, empty);
+      std::fill(r.post + x, r.post + x + N, empty);
+      continue;
+    }
+    const I t_raw = hn::Load(di, tri);
+    const I t = hn::IfThenElse(hn::Lt(t_raw, hn::Zero(di)), hn::Zero(di), t_raw);  // empty lanes: triangle 0, not kept
+    const I three = hn::Set(di, 3), one = hn::Set(di, 1), two = hn::Set(di, 2);
+    const I corner[3] = {HwyLanes::gather(r.M.triangles, three * t), HwyLanes::gather(r.M.triangles, three * t + one),
+                         HwyLanes::gather(r.M.triangles, three * t + two)};
+    const float* cam = &r.G.cam[0].x;
+    V X[3][3];
+    for (int k = 0; k < 3; ++k) {
+      const I base = three * corner[k];
+      X[k][0] = HwyLanes::gather(cam, base), X[k][1] = HwyLanes::gather(cam, base + one);
+      X[k][2] = HwyLanes::gather(cam, base + two);
+    }
+    const V px = hn::ConvertTo(d, hn::Add(hn::Set(di, r.x + x), hn::Iota(di, 0)));
+    const V ray[3] = {(px - hn::Set(d, r.K.cx)) / hn::Set(d, r.K.fx), ray_y, hn::Set(d, 1.f)};
+    V bv[3];
+    const V sv = HWY_NAMESPACE::ray_barycentrics_lanes<HwyLanes>(ray, X[0], X[1], X[2], bv);
+    const V z[3] = {X[0][2], X[1][2], X[2][2]};
+    V dep, cv[3], duv[3], dvv[3];
+    HWY_NAMESPACE::shade_surface_lanes<HwyLanes>(r.M, r.G, t, corner, bv, z, &dep, cv, duv, dvv);
+    hn::Store(sv, d, s);
+    hn::Store(dep, d, depth);
+    for (int k = 0; k < 3; ++k) {
+      hn::Store(bv[k], d, b[k]);
+      hn::Store(cv[k], d, c[k]);
+      hn::Store(duv[k], d, du[k]);
+      hn::Store(dvv[k], d, dv[k]);
+    }
+    for (int j = 0; j < N; ++j) {
+      if (tri[j] < 0) {
+        r.pre[x + j] = r.post[x + j] = empty;
+        continue;
+      }
+      const PixelAttr a{1.f, {c[0][j], c[1][j], c[2][j]}, depth[j]};
+      r.pre[x + j] = r.post[x + j] = a;
+      detail::ShadeBary& sb = r.bary[x + j];
+      for (int k = 0; k < 3; ++k) sb.raw[k] = sb.b[k] = b[k][j];
+      sb.s = s[j];
+      sb.clamped = false;
+      sb.dcdu = Vec3f{du[0][j], du[1][j], du[2][j]};
+      sb.dcdv = Vec3f{dv[0][j], dv[1][j], dv[2][j]};
+    }
+  }
+  return x;
+}
+
+const char* TargetName() { return hwy::TargetName(HWY_TARGET); }
+
+}  // namespace HWY_NAMESPACE
+}  // namespace diffdope
+HWY_AFTER_NAMESPACE();
+
+#if HWY_ONCE
+namespace diffdope {
+HWY_EXPORT(LossRowImpl);
+HWY_EXPORT(ShadeRowImpl);
+HWY_EXPORT(TargetName);
+
+int loss_row(const LossRow& row, double sum[3]) { return HWY_DYNAMIC_DISPATCH(LossRowImpl)(row, sum); }
+int shade_row(const ShadeRow& row) { return HWY_DYNAMIC_DISPATCH(ShadeRowImpl)(row); }
+const char* simd_row_target() { return HWY_DYNAMIC_DISPATCH(TargetName)(); }
+}  // namespace diffdope
+#endif

@@ -1,0 +1,46 @@
+#pragma once
+// The CPU's pixel stages over a row of pixels at once (Highway vectors, chosen at run time for the CPU it runs on):
+// the lane kernels (include/diffdope/kernels/*_lanes.inc) on many pixels, the same bits per pixel as their
+// one-pixel instantiation. Each runs the row's first pixels, as many as fill whole vectors, and returns how many;
+// the caller does the rest one pixel at a time.
+#include "diffdope/kernels/pixel_loss.hpp"
+#include "diffdope/kernels/silhouette.hpp"
+
+namespace diffdope {
+
+struct LossRow {
+  PixelLossParams P;
+  const PixelAttr* post;  // n rendered pixels (after the blends)
+  const float* S;         // n observed mask values; nullptr: S = 1
+  const float* I;         // 3n observed rgb values; nullptr: 0
+  const float* D;         // n observed depths (<= 0: no reading); nullptr: 0
+  PixelAttr* g_post;      // n: receives dL/d(post); nullptr: no gradient
+  int n;
+};
+
+/// The loss pass (pixel_loss_step) on the row's whole vectors. Adds each one's (rgb, depth, mask) terms to sum[0..2] as doubles, one pixel after the other in order: the same sums as adding
+/// pixel_loss_step()'s values pixel by pixel. The caller does the rest of the row one pixel at a time.
+int loss_row(const LossRow& row, double sum[3]);
+
+/// A row of the shade stage: per pixel, the z-buffer's nearest triangle (-1: none) and its shading at the pixel
+/// centre, as pipeline::ShadeStage::pixel() writes them one pixel at a time (shade_pixel(), no clamping).
+struct ShadeRow {
+  MeshView M;
+  ProjectedView G;
+  Intrinsics K;
+  const unsigned long long* key;  // n z-buffer keys: (depth key << 32) | triangle, all ones = empty
+  int* tri;                       // n: receive the triangle
+  PixelAttr *pre, *post;          // n: receive the shading (coverage 1) or zeros
+  detail::ShadeBary* bary;        // n: receive the barycentrics and texture derivatives (covered pixels only)
+  int x;                          // image column of the row's first pixel (pixel centres at integers)
+  float y;                        // image row of the row
+  int n;
+};
+
+/// The shade stage on the row's whole vectors; returns how many pixels it did.
+int shade_row(const ShadeRow& row);
+
+/// The instruction set the rows run on here (e.g. "AVX3", "AVX2", "SSE4"; for the profile and the README).
+const char* simd_row_target();
+
+}  // namespace diffdope

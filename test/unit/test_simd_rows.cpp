@@ -1,0 +1,195 @@
+// The CPU's SIMD rows against their one-pixel kernels, bit for bit, over rows of every length around the vector
+// width: loss_row() against pixel_loss_step() (every value, gradient and sum, over the cases the formula
+// distinguishes), shade_row() against shade_pixel() (triangle, attributes, barycentrics, texture derivatives).
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstring>
+#include <limits>
+#include <random>
+#include <vector>
+
+#include <Eigen/Geometry>
+
+#include "diffdope/procedural.hpp"
+#include "simd_rows.hpp"
+
+namespace {
+using namespace diffdope;
+
+template <class T>
+bool same_bits(T a, T b) {
+  return std::memcmp(&a, &b, sizeof a) == 0;
+}
+
+struct RowData {
+  std::vector<PixelAttr> post;
+  std::vector<float> S, I, D;
+};
+
+/// Pixels drawn from the cases pixel_loss() tells apart: uncovered, covered and blended coverage; observed mask
+/// 0, 1 or partial; no depth reading, a valid one, an occluder far in front, NaN; now and then a NaN colour.
+RowData make_row(int n, std::mt19937& rng) {
+  std::uniform_real_distribution<float> u(0.f, 1.f);
+  const auto pick = [&](std::initializer_list<float> v) { return *(v.begin() + int(u(rng) * float(v.size()) * 0.999f)); };
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  RowData r;
+  for (int i = 0; i < n; ++i) {
+    const float cov = pick({0.f, 1.f, 0.3f, 0.5f, 1.f});
+    const float depth = 0.4f + 0.2f * u(rng);
+    r.post.push_back(PixelAttr{cov, {cov * u(rng), cov * u(rng), cov * u(rng)}, cov * depth});
+    r.S.push_back(pick({0.f, 1.f, 1.f, 0.5f, 0.2f}));
+    for (int c = 0; c < 3; ++c) r.I.push_back(u(rng) < 0.03f ? nan : u(rng));
+    r.D.push_back(pick({0.f, -1.f, depth + 0.01f, depth - 0.3f, depth + 0.2f, nan}));
+  }
+  return r;
+}
+
+TEST(SimdRows, ARowGivesThePixelKernelsBitsForEveryValueGradientAndSum) {
+  std::mt19937 rng(7);
+  std::vector<PixelLossParams> params = {{0.3f, 0.2f, 0.1f, 0.5f, 0.05f, 0.02f},   // every term, occlusion on
+                                         {0.3f, 0.f, 0.1f, 0.5f, 0.05f, 0.f},      // no depth term, no occlusion
+                                         {0.f, 0.2f, 0.f, 0.25f, 0.03f, 0.02f}};   // depth alone
+  int rows = 0;
+  for (const PixelLossParams& P : params)
+    for (int n : {0, 1, 3, 4, 7, 8, 9, 15, 16, 17, 31, 32, 33, 64, 101})
+      for (int absent = 0; absent < 8; ++absent)  // bit 0: no S, bit 1: no rgb, bit 2: no depth
+        for (bool gradient : {false, true}) {
+          const RowData d = make_row(n, rng);
+          std::vector<PixelAttr> g(size_t(n), PixelAttr{-7.f, {-7.f, -7.f, -7.f}, -7.f});
+          const LossRow row{P, d.post.data(), absent & 1 ? nullptr : d.S.data(), absent & 2 ? nullptr : d.I.data(),
+                            absent & 4 ? nullptr : d.D.data(), gradient ? g.data() : nullptr, n};
+          double sum[3] = {0.5, 0.25, 0.125};  // loss_row adds to what is there
+          const int done = loss_row(row, sum);
+          ASSERT_LE(done, n);
+          if (n >= 64) ASSERT_GT(done, 0) << "a vector holds at most 64 floats (2048-bit SVE)";
+          double want[3] = {0.5, 0.25, 0.125};
+          const float zero3[3] = {0.f, 0.f, 0.f};
+          for (int x = 0; x < done; ++x) {
+            PixelLossGrad pg;
+            const PixelAttr& a = d.post[size_t(x)];
+            const PixelLossValue v = pixel_loss_step(P, row.S ? row.S[x] : 1.f, row.I ? row.I + 3 * x : zero3,
+                                                     row.D ? row.D[x] : 0.f, a.cov, a.c, a.d, &pg);
+            want[0] += double(v.rgb), want[1] += double(v.depth), want[2] += double(v.mask);
+            const PixelAttr& got = g[size_t(x)];
+            if (gradient) {
+              ASSERT_TRUE(same_bits(got.cov, pg.cov) && same_bits(got.d, pg.d) && same_bits(got.c[0], pg.c[0]) &&
+                          same_bits(got.c[1], pg.c[1]) && same_bits(got.c[2], pg.c[2]))
+                  << "gradient of pixel " << x << " of " << n << ": " << got.cov << " vs " << pg.cov;
+            } else {
+              ASSERT_EQ(got.cov, -7.f) << "no gradient asked, none written";
+            }
+          }
+          for (int x = done; x < n; ++x) ASSERT_EQ(g[size_t(x)].cov, -7.f) << "the rest is the caller's";
+          for (int k = 0; k < 3; ++k)
+            ASSERT_TRUE(same_bits(sum[k], want[k])) << "term " << k << ", n " << n << ": " << sum[k] << " vs " << want[k];
+          ++rows;
+        }
+  EXPECT_EQ(rows, 3 * 15 * 8 * 2);
+  std::printf("loss_row runs on %s\n", simd_row_target());
+}
+
+/// A scan-like mesh's triangles seen by a camera, with the per-triangle inputs of the shade stage chosen to reach
+/// every case of the lookup: mip levels whole, fractional, the last one and beyond what a small texture has; some
+/// triangles vertex-coloured; pixel centres inside and far outside their triangle (UVs past the texture's border).
+struct ShadeScene {
+  Mesh mesh;
+  std::vector<TextureView> textures;
+  std::vector<Vec3f> cam;
+  std::vector<float> area, level;
+  std::vector<int> tri_texture;
+  MeshView M;
+  ProjectedView G;
+  Intrinsics K{300.f, 310.f, 160.5f, 120.25f, 320, 240};
+
+  ShadeScene(bool uvs, std::mt19937& rng) : mesh(make_scan_like(ScanShape::Bottle, Eigen::Vector3d(0.07, 0.045, 0.19), 1500, 128, 3)) {
+    std::uniform_real_distribution<float> u(0.f, 1.f);
+    M = mesh.view(textures);
+    if (!uvs) M.uvs = nullptr;
+    const int levels = textures.at(0).levels;
+    const Eigen::Matrix3d R = Eigen::AngleAxisd(0.7, Eigen::Vector3d(0.3, 1.0, 0.2).normalized()).toRotationMatrix();
+    for (int i = 0; i < M.num_vertices; ++i) {
+      const Eigen::Vector3d p(M.positions[i].x, M.positions[i].y, M.positions[i].z);
+      const Eigen::Vector3d X = R * p + Eigen::Vector3d(0.01, -0.02, 0.45);
+      cam.push_back(Vec3f{float(X.x()), float(X.y()), float(X.z())});
+    }
+    tri_texture.assign(M.tri_texture, M.tri_texture + M.num_triangles);
+    for (int t = 0; t < M.num_triangles; ++t) {
+      if (u(rng) < 0.15f) tri_texture[size_t(t)] = -1;
+      const float pick = u(rng);
+      level.push_back(pick < 0.2f ? float(int(u(rng) * float(levels))) : pick < 0.3f ? float(levels - 1)
+                                                                     : u(rng) * float(levels - 1));
+      area.push_back(1.f);
+    }
+    M.tri_texture = tri_texture.data();
+    G = ProjectedView{cam.data(), nullptr, area.data(), level.data()};
+  }
+};
+
+TEST(SimdRows, AShadeRowGivesThePixelKernelsBitsForTriangleAttributesAndBarycentrics) {
+  std::mt19937 rng(11);
+  int rows = 0, covered = 0;
+  for (bool uvs : {true, false}) {
+    ShadeScene sc(uvs, rng);
+    std::uniform_int_distribution<int> tri(0, sc.M.num_triangles - 1);
+    std::uniform_real_distribution<float> u(0.f, 1.f);
+    for (int n : {0, 1, 3, 7, 8, 9, 15, 16, 17, 31, 32, 33, 64, 101})
+      for (int rep = 0; rep < 4; ++rep) {
+        // Runs of one triangle (neighbouring pixels of a real raster), empty pixels now and then.
+        std::vector<unsigned long long> key(static_cast<size_t>(n));
+        int t = tri(rng);
+        for (auto& k : key) {
+          if (u(rng) < 0.3f) t = tri(rng);
+          k = u(rng) < 0.15f ? ~0ull : (0x3f000000ull << 32) | unsigned(t);
+        }
+        const PixelAttr stale{-7.f, {-7.f, -7.f, -7.f}, -7.f};
+        std::vector<int> tri_out(size_t(n), -9);
+        std::vector<PixelAttr> pre(size_t(n), stale), post(size_t(n), stale);
+        std::vector<detail::ShadeBary> bary(static_cast<size_t>(n));
+        const int x = 40 + 13 * rep, y = 30 + 41 * rep;
+        const ShadeRow row{sc.M, sc.G, sc.K, key.data(), tri_out.data(), pre.data(), post.data(), bary.data(), x,
+                           float(y), n};
+        const int done = shade_row(row);
+        ASSERT_LE(done, n);
+        if (n >= 64) ASSERT_GT(done, 0) << "a vector holds at most 64 floats (2048-bit SVE)";
+        for (int i = 0; i < done; ++i) {
+          const int want_t = key[size_t(i)] == ~0ull ? -1 : int(key[size_t(i)] & 0xffffffffu);
+          ASSERT_EQ(tri_out[size_t(i)], want_t);
+          PixelAttr want{0.f, {0.f, 0.f, 0.f}, 0.f};
+          detail::ShadeBary wb{};
+          if (want_t >= 0) {
+            Vec3f c;
+            float d;
+            shade_pixel(sc.M, sc.G, sc.K, want_t, float(x + i), float(y), &c, &d, false, &wb);
+            want = PixelAttr{1.f, {c.x, c.y, c.z}, d};
+            ++covered;
+            const detail::ShadeBary& gb = bary[size_t(i)];
+            for (int k = 0; k < 3; ++k)
+              ASSERT_TRUE(same_bits(gb.raw[k], wb.raw[k]) && same_bits(gb.b[k], wb.b[k]))
+                  << "barycentric " << k << " of pixel " << i << " of " << n;
+            ASSERT_TRUE(same_bits(gb.s, wb.s));
+            ASSERT_EQ(gb.clamped, wb.clamped);
+            const float g[6] = {gb.dcdu.x, gb.dcdu.y, gb.dcdu.z, gb.dcdv.x, gb.dcdv.y, gb.dcdv.z};
+            const float w[6] = {wb.dcdu.x, wb.dcdu.y, wb.dcdu.z, wb.dcdv.x, wb.dcdv.y, wb.dcdv.z};
+            for (int k = 0; k < 6; ++k)
+              ASSERT_TRUE(same_bits(g[k], w[k])) << "texture derivative " << k << " of pixel " << i << ": " << g[k]
+                                                 << " vs " << w[k];
+          }
+          for (const PixelAttr* got : {&pre[size_t(i)], &post[size_t(i)]}) {
+            ASSERT_TRUE(same_bits(got->cov, want.cov) && same_bits(got->d, want.d)) << "pixel " << i << " of " << n;
+            for (int ch = 0; ch < 3; ++ch)
+              ASSERT_TRUE(same_bits(got->c[ch], want.c[ch]))
+                  << "colour " << ch << " of pixel " << i << " of " << n << ": " << got->c[ch] << " vs " << want.c[ch];
+          }
+        }
+        for (int i = done; i < n; ++i)
+          ASSERT_TRUE(tri_out[size_t(i)] == -9 && pre[size_t(i)].cov == -7.f && post[size_t(i)].cov == -7.f)
+              << "the rest is the caller's";
+        ++rows;
+      }
+  }
+  EXPECT_EQ(rows, 2 * 14 * 4);
+  EXPECT_GT(covered, 1000);
+}
+
+}  // namespace
