@@ -206,10 +206,11 @@ class HostExec {
   /// Where part `part` of `parts` equal slices of [0, n) begins (part `parts` begins at n).
   static int slice_begin(int n, int part, int parts) { return int(int64_t(n) * part / parts); }
 
-  /// How many pixels of span [lo, hi] of row ly a stage by rows did at once (0 for the others).
-  template <class Stage>
-  static int first_by_rows(const Stage& stage, int ly, int lo, int hi, int h) {
-    if constexpr (pipeline::has_rows<Stage>::value) return lo <= hi ? stage.row(ly, lo, hi, h) : 0;
+  /// How many pixels of span [lo, hi] of row ly a stage by rows did at once (0 for the others); `sums`: a
+  /// reducing stage's row sums.
+  template <class Stage, class... Sums>
+  static int first_by_rows(const Stage& stage, int ly, int lo, int hi, int h, Sums... sums) {
+    if constexpr (pipeline::has_rows<Stage>::value) return lo <= hi ? stage.row(ly, lo, hi, h, sums...) : 0;
     return 0;
   }
 
@@ -274,9 +275,7 @@ class HostExec {
       const int lo = skip ? near->lo[size_t(ly)] : 0, hi = skip ? near->hi[size_t(ly)] : w - 1;
       if (skip) fill_outside(s.stage, ly * w, w, lo, hi, h);
       double row[K] = {};
-      int lx = lo;
-      if constexpr (pipeline::has_rows<Stage>::value) lx += s.stage.row(ly, lo, hi, h, row);
-      for (; lx <= hi; ++lx) {
+      for (int lx = lo + first_by_rows(s.stage, ly, lo, hi, h, row); lx <= hi; ++lx) {
         double v[K] = {};
         s.stage.pixel(lx, ly, ly * w + lx, h, v);
         for (int k = 0; k < K; ++k) row[k] += v[k];

@@ -150,6 +150,9 @@ struct WorkArrays {
 
 constexpr unsigned long long kEmptyKey = ~0ull;
 
+/// The triangle a z-buffer key holds, -1 for an empty pixel.
+DD_HOST_DEVICE int key_triangle(unsigned long long key) { return key == kEmptyKey ? -1 : int(key & 0xffffffffu); }
+
 /// Keeps the smaller key: an atomic on the device; on the host each hypothesis runs on one thread.
 DD_HOST_DEVICE void key_min(unsigned long long* slot, unsigned long long v) {
 #if defined(__CUDA_ARCH__)
@@ -318,8 +321,7 @@ struct ShadeStage : PixelStage<ShadeStage> {
     const Hypothesis& hy = p.H[h];
     if (i >= hy.w * hy.h) return;
     const int q = hy.offset + i;
-    const unsigned long long k = p.key[q];
-    const int t = k == kEmptyKey ? -1 : int(k & 0xffffffffu);
+    const int t = key_triangle(p.key[q]);
     p.tri[q] = t;
     PixelAttr a{0.f, {0.f, 0.f, 0.f}, 0.f};
     if (t >= 0) {

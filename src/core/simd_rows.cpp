@@ -13,6 +13,7 @@
 
 #include <algorithm>
 
+#include "render_stages.hpp"  // (the z-buffer key)
 #include "simd_rows.hpp"
 
 HWY_BEFORE_NAMESPACE();
@@ -152,8 +153,7 @@ int ShadeRowImpl(const ShadeRow& r) {
   for (; x + N <= r.n; x += N) {
     bool any = false;
     for (int j = 0; j < N; ++j) {
-      const unsigned long long k = r.key[x + j];
-      tri[j] = k == ~0ull ? -1 : int(k & 0xffffffffu);
+      tri[j] = pipeline::key_triangle(r.key[x + j]);
       r.tri[x + j] = tri[j];
       any |= tri[j] >= 0;
     }

@@ -12,6 +12,7 @@
 #include <Eigen/Geometry>
 
 #include "diffdope/procedural.hpp"
+#include "render_stages.hpp"
 #include "simd_rows.hpp"
 
 namespace {
@@ -140,7 +141,7 @@ TEST(SimdRows, AShadeRowGivesThePixelKernelsBitsForTriangleAttributesAndBarycent
         int t = tri(rng);
         for (auto& k : key) {
           if (u(rng) < 0.3f) t = tri(rng);
-          k = u(rng) < 0.15f ? ~0ull : (0x3f000000ull << 32) | unsigned(t);
+          k = u(rng) < 0.15f ? pipeline::kEmptyKey : (0x3f000000ull << 32) | unsigned(t);
         }
         const PixelAttr stale{-7.f, {-7.f, -7.f, -7.f}, -7.f};
         std::vector<int> tri_out(size_t(n), -9);
@@ -153,7 +154,7 @@ TEST(SimdRows, AShadeRowGivesThePixelKernelsBitsForTriangleAttributesAndBarycent
         ASSERT_LE(done, n);
         if (n >= 64) ASSERT_GT(done, 0) << "a vector holds at most 64 floats (2048-bit SVE)";
         for (int i = 0; i < done; ++i) {
-          const int want_t = key[size_t(i)] == ~0ull ? -1 : int(key[size_t(i)] & 0xffffffffu);
+          const int want_t = pipeline::key_triangle(key[size_t(i)]);
           ASSERT_EQ(tri_out[size_t(i)], want_t);
           PixelAttr want{0.f, {0.f, 0.f, 0.f}, 0.f};
           detail::ShadeBary wb{};
