@@ -369,13 +369,21 @@ struct BlendDetectStage : PixelStage<BlendDetectStage> {
       const int b = horizontal ? a + 1 : a + hy.w;
       if (p.tri[a] == p.tri[b]) continue;
       const Vec2f pb = horizontal ? Vec2f{pa.x + 1.f, pa.y} : Vec2f{pa.x, pa.y + 1.f};
-      BlendEvent ev;
-      if (discontinuity_blend(M, G, p.K, a, p.tri[a], p.pre[a].d, pa, b, p.tri[b], p.pre[b].d, pb, horizontal, &ev)) {
-        p.events[2 * a + dir] = ev;
+      if (discontinuity_blend(M, G, p.K, a, p.tri[a], p.pre[a].d, pa, b, p.tri[b], p.pre[b].d, pb, horizontal,
+                              &p.events[2 * a + dir]))
         p.has_event[2 * a + dir] = 1;
-      }
     }
   }
+#if !defined(__CUDACC__)
+  static constexpr bool kRows = true;
+  int row(int ly, int lo, int hi, int h) const {
+    const Hypothesis& hy = p.H[h];
+    const BlendRow r{p.objects[hy.object].M, projected(p, hy), p.K, p.tri, p.pre, p.events, p.has_event,
+                     hy.offset + ly * hy.w + lo, hy.w, hy.w - 1 - lo, ly + 1 < hy.h, hy.x0 + lo, float(hy.y0 + ly),
+                     hi - lo + 1};
+    return blend_row(r);
+  }
+#endif
 };
 
 /// The (up to four) event slots that can target pixel q, in the CPU's scan order (pixels row by row, each

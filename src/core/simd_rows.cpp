@@ -1,4 +1,4 @@
-// loss_row() and shade_row() for every instruction set Highway targets, one chosen at run time (foreach_target.h
+// loss_row(), shade_row() and blend_row() for every instruction set Highway targets, one chosen at run time (foreach_target.h
 // compiles this file once per target). Built without FMA contraction (CMakeLists.txt), so each lane computes what
 // the one-pixel kernels compute, bit for bit.
 // Not SVE: its vectors are sizeless types, which the lane kernels cannot keep in arrays and structs (V c[3]). On
@@ -12,6 +12,7 @@
 #include <hwy/highway.h>
 
 #include <algorithm>
+#include <vector>
 
 #include "render_stages.hpp"  // (the z-buffer key)
 #include "simd_rows.hpp"
@@ -46,17 +47,24 @@ struct HwyLanes {
   }
 
   using I = hn::Vec<DI>;
+  static constexpr size_t kMaxLanes = hn::MaxLanes(DF());
   static I seti(int x) { return hn::Set(DI(), x); }
   static M lti(I a, I b) { return hn::RebindMask(DF(), hn::Lt(a, b)); }
+  static M eqi(I a, I b) { return hn::RebindMask(DF(), hn::Eq(a, b)); }
   static I selecti(M m, I a, I b) { return hn::IfThenElse(hn::RebindMask(DI(), m), a, b); }
   static V to_float(I a) { return hn::ConvertTo(DF(), a); }
   static I truncate(V a) { return hn::ConvertTo(DI(), a); }
   static V gather(const float* base, I i) { return hn::GatherIndex(DF(), base, i); }
   static I gather(const int* base, I i) { return hn::GatherIndex(DI(), base, i); }
+  static I gather(const unsigned char* base, I i) {  // (no byte gather: one lane at a time)
+    HWY_ALIGN int idx[kMaxLanes];
+    hn::Store(i, DI(), idx);
+    for (size_t j = 0; j < hn::Lanes(DF()); ++j) idx[j] = base[idx[j]];
+    return hn::Load(DI(), idx);
+  }
 
   // Texture levels differ per lane (each lane's triangle has its own texture and mip level): per-lane pointers,
   // and texels read one lane at a time (the levels are separate arrays, out of reach of one gather's base).
-  static constexpr size_t kMaxLanes = hn::MaxLanes(DF());
   struct Level {
     const float* rgb[kMaxLanes];
     I w, h;
@@ -98,6 +106,7 @@ struct HwyLanes {
 #include "diffdope/kernels/pixel_loss_lanes.inc"
 #include "diffdope/kernels/texture_lanes.inc"
 #include "diffdope/kernels/shade_lanes.inc"
+#include "diffdope/kernels/silhouette_lanes.inc"
 
 int LossRowImpl(const LossRow& r, double* sum) {
   const DF d;
@@ -207,6 +216,89 @@ int ShadeRowImpl(const ShadeRow& r) {
   return x;
 }
 
+/// Steps of a silhouette walk taken on vectors. Most walks end within one or two triangles, but a vector waits
+/// for its longest walk: those longer than this go on one pair at a time.
+constexpr int kVectorWalkSteps = 3;
+
+int BlendRowImpl(const BlendRow& r) {
+  const DF d;
+  const DI di;
+  using V = HwyLanes::V;
+  using I = HwyLanes::I;
+  constexpr size_t kMax = HwyLanes::kMaxLanes;
+  const int N = int(hn::Lanes(d));
+  // The row's pairs of different triangles, packed so that every vector walks as many pairs as it holds. (Per
+  // thread, grown to the longest row seen: no allocation per row.)
+  struct Pairs {
+    std::vector<int> F, other, horizontal, slot, f, o;
+    std::vector<float> pfx, pfy, pox, poy;
+  };
+  thread_local Pairs q;
+  const size_t most = size_t(2 * r.n + N);
+  if (q.F.size() < most)
+    for (auto* v : {&q.F, &q.other, &q.horizontal, &q.slot, &q.f, &q.o}) v->resize(most);
+  if (q.pfx.size() < most)
+    for (auto* v : {&q.pfx, &q.pfy, &q.pox, &q.poy}) v->resize(most);
+  int m = 0;
+  for (int i = 0; i < r.n; ++i)
+    for (int dir = 0; dir < 2; ++dir) {  // as BlendDetectStage::pixel() and discontinuity_blend() set it up
+      const bool horizontal = dir == 0;
+      const int a = r.q + i;
+      r.has_event[2 * a + dir] = 0;
+      if (horizontal ? i >= r.right : !r.below) continue;
+      const int b = horizontal ? a + 1 : a + r.stride;
+      const int ta = r.tri[a], tb = r.tri[b];
+      if (ta == tb) continue;
+      const bool front = a_in_front(ta, r.pre[a].d, tb, r.pre[b].d);
+      const Vec2f pa{float(r.x + i), r.y};
+      const Vec2f pb = horizontal ? Vec2f{pa.x + 1.f, pa.y} : Vec2f{pa.x, pa.y + 1.f};
+      const Vec2f pf = front ? pa : pb, po = front ? pb : pa;
+      q.F[size_t(m)] = front ? ta : tb, q.other[size_t(m)] = front ? tb : ta;
+      q.f[size_t(m)] = front ? a : b, q.o[size_t(m)] = front ? b : a;
+      q.horizontal[size_t(m)] = horizontal ? 1 : 0, q.slot[size_t(m)] = 2 * a + dir;
+      q.pfx[size_t(m)] = pf.x, q.pfy[size_t(m)] = pf.y, q.pox[size_t(m)] = po.x, q.poy[size_t(m)] = po.y;
+      ++m;
+    }
+  for (int j = m; j < m + N; ++j) {  // the last vector's unused lanes (not walked)
+    q.F[size_t(j)] = q.other[size_t(j)] = q.horizontal[size_t(j)] = 0;
+    q.pfx[size_t(j)] = q.pfy[size_t(j)] = q.pox[size_t(j)] = q.poy[size_t(j)] = 0.f;
+  }
+  HWY_ALIGN int C[kMax], k[kMax], found[kMax], unfinished[kMax];
+  HWY_ALIGN float t[kMax];
+  for (int j0 = 0; j0 < m; j0 += N) {
+    const size_t o = size_t(j0);
+    I Cv, kv;
+    V tv;
+    HwyLanes::M go_on;
+    const HwyLanes::M blend = HWY_NAMESPACE::silhouette_walk_lanes<HwyLanes>(
+        r.M, r.G, hn::LoadU(di, &q.F[o]), hn::LoadU(di, &q.other[o]), hn::LoadU(d, &q.pfx[o]),
+        hn::LoadU(d, &q.pfy[o]), hn::LoadU(d, &q.pox[o]), hn::LoadU(d, &q.poy[o]), hn::FirstN(d, size_t(m - j0)),
+        hn::RebindMask(d, hn::Ne(hn::LoadU(di, &q.horizontal[o]), hn::Zero(di))), 0, kVectorWalkSteps, &Cv, &kv,
+        &tv, &go_on);
+    if (hn::AllFalse(d, blend) && hn::AllFalse(d, go_on)) continue;
+    hn::Store(hn::IfThenElseZero(hn::RebindMask(di, blend), hn::Set(di, 1)), di, found);
+    hn::Store(hn::IfThenElseZero(hn::RebindMask(di, go_on), hn::Set(di, 1)), di, unfinished);
+    hn::Store(Cv, di, C);
+    hn::Store(kv, di, k);
+    hn::Store(tv, d, t);
+    for (int j = 0; j < N; ++j) {
+      if (!found[j] && !unfinished[j]) continue;
+      const size_t e = o + size_t(j);
+      const Vec2f pf{q.pfx[e], q.pfy[e]}, po{q.pox[e], q.poy[e]};
+      int c = C[j], edge = k[j];
+      float at = t[j];
+      bool longer;
+      if (unfinished[j] && !::diffdope::silhouette_walk_lanes<ScalarLanes>(
+                               r.M, r.G, c, q.other[e], pf.x, pf.y, po.x, po.y, true, q.horizontal[e] != 0,
+                               kVectorWalkSteps, kMaxSilhouetteWalk, &c, &edge, &at, &longer))
+        continue;
+      blend_at_crossing(r.M, r.G, r.K, q.f[e], pf, q.o[e], q.other[e], po, c, edge, at, &r.events[q.slot[e]]);
+      r.has_event[q.slot[e]] = 1;
+    }
+  }
+  return r.n;
+}
+
 const char* TargetName() { return hwy::TargetName(HWY_TARGET); }
 
 }  // namespace HWY_NAMESPACE
@@ -217,10 +309,12 @@ HWY_AFTER_NAMESPACE();
 namespace diffdope {
 HWY_EXPORT(LossRowImpl);
 HWY_EXPORT(ShadeRowImpl);
+HWY_EXPORT(BlendRowImpl);
 HWY_EXPORT(TargetName);
 
 int loss_row(const LossRow& row, double sum[3]) { return HWY_DYNAMIC_DISPATCH(LossRowImpl)(row, sum); }
 int shade_row(const ShadeRow& row) { return HWY_DYNAMIC_DISPATCH(ShadeRowImpl)(row); }
+int blend_row(const BlendRow& row) { return HWY_DYNAMIC_DISPATCH(BlendRowImpl)(row); }
 const char* simd_row_target() { return HWY_DYNAMIC_DISPATCH(TargetName)(); }
 }  // namespace diffdope
 #endif

@@ -40,6 +40,30 @@ struct ShadeRow {
 /// The shade stage on the row's whole vectors; returns how many pixels it did.
 int shade_row(const ShadeRow& row);
 
+/// A row of the blend detection: each pixel's pair with its right neighbour (slot 2 q) and with the pixel below
+/// (slot 2 q + 1), as pipeline::BlendDetectStage::pixel() decides them one pixel at a time
+/// (discontinuity_blend()). Indices are the region's (q: the pixel's index in the arrays and in its events).
+struct BlendRow {
+  MeshView M;
+  ProjectedView G;
+  Intrinsics K;
+  const int* tri;           // the region's triangle per pixel (-1: none)
+  const PixelAttr* pre;     // the region's shading before the blends (depth: d)
+  BlendEvent* events;       // the region's event slots, two per pixel: receive the events found
+  unsigned char* has_event;  // ... and whether each slot holds one
+  int q;                    // index of the row's first pixel
+  int stride;               // the pixel below pixel q is q + stride
+  int right;                // the row's first `right` pixels have a right neighbour in the region
+  bool below;               // whether the row below is in the region
+  int x;                    // image column of the row's first pixel (pixel centres at integers)
+  float y;                  // image row of the row
+  int n;
+};
+
+/// The blend detection on the whole row (its pairs of different triangles packed into vectors, the longest walks
+/// finished one pair at a time); returns n.
+int blend_row(const BlendRow& row);
+
 /// The instruction set the rows run on here (e.g. "AVX3", "AVX2", "SSE4"; for the profile and the README).
 const char* simd_row_target();
 

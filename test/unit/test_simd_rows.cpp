@@ -1,6 +1,7 @@
 // The CPU's SIMD rows against their one-pixel kernels, bit for bit, over rows of every length around the vector
 // width: loss_row() against pixel_loss_step() (every value, gradient and sum, over the cases the formula
-// distinguishes), shade_row() against shade_pixel() (triangle, attributes, barycentrics, texture derivatives).
+// distinguishes), shade_row() against shade_pixel() (triangle, attributes, barycentrics, texture derivatives),
+// blend_row() against discontinuity_blend() (every event slot, every field of every event).
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -11,6 +12,7 @@
 
 #include <Eigen/Geometry>
 
+#include "diffdope/kernels/vertex_stage.hpp"
 #include "diffdope/procedural.hpp"
 #include "render_stages.hpp"
 #include "simd_rows.hpp"
@@ -191,6 +193,141 @@ TEST(SimdRows, AShadeRowGivesThePixelKernelsBitsForTriangleAttributesAndBarycent
   }
   EXPECT_EQ(rows, 2 * 14 * 4);
   EXPECT_GT(covered, 1000);
+}
+
+/// A scan-like bottle drawn by a brute-force z-buffer (nearest triangle whose interior holds the pixel centre,
+/// back faces too) in a region that cuts it, with the per-triangle inputs of the blend detection: projected vertices, areas (a few set
+/// to 0: undrawn neighbours), mip levels, and extra colour seams. `focal`: small ones make most triangles
+/// smaller than a pixel (long walks between pixel centres).
+struct BlendScene {
+  Mesh mesh;
+  std::vector<TextureView> textures;
+  std::vector<Vec3f> cam;
+  std::vector<Vec2f> pix;
+  std::vector<float> area, level;
+  std::vector<unsigned char> seams;
+  MeshView M;
+  ProjectedView G;
+  Intrinsics K;
+  int x0 = 0, y0 = 0, w = 0, h = 0;
+  std::vector<int> tri;
+  std::vector<PixelAttr> pre;
+
+  BlendScene(float focal, std::mt19937& rng)
+      : mesh(make_scan_like(ScanShape::Bottle, Eigen::Vector3d(0.07, 0.045, 0.19), 1500, 128, 3)),
+        K{focal, focal * 1.03f, 160.5f, 120.25f, 320, 240} {
+    std::uniform_real_distribution<float> u(0.f, 1.f);
+    M = mesh.view(textures);
+    const Eigen::Matrix3d R = Eigen::AngleAxisd(1.1, Eigen::Vector3d(0.3, 1.0, 0.2).normalized()).toRotationMatrix();
+    float lx = 1e9f, hx = -1e9f, ly = 1e9f, hy = -1e9f;
+    for (int i = 0; i < M.num_vertices; ++i) {
+      const Eigen::Vector3d X = R * Eigen::Vector3d(M.positions[i].x, M.positions[i].y, M.positions[i].z) +
+                                Eigen::Vector3d(0.01, -0.02, 0.45);
+      cam.push_back(Vec3f{float(X.x()), float(X.y()), float(X.z())});
+      pix.push_back(project(K, cam.back()));
+      lx = std::min(lx, pix.back().x), hx = std::max(hx, pix.back().x);
+      ly = std::min(ly, pix.back().y), hy = std::max(hy, pix.back().y);
+    }
+    seams.assign(M.seams, M.seams + 3 * M.num_triangles);
+    for (int t = 0; t < M.num_triangles; ++t) {
+      area.push_back(u(rng) < 0.03f ? 0.f : triangle_setup(M, cam.data(), pix.data(), 0.01f, false, t));
+      level.push_back(triangle_mip_level(M, t, area.back()));
+      for (int k = 0; k < 3; ++k) seams[size_t(3 * t + k)] |= u(rng) < 0.1f ? 1 : 0;
+    }
+    M.seams = seams.data();
+    G = ProjectedView{cam.data(), pix.data(), area.data(), level.data()};
+    // The region cuts the object on every side (as the image border may): pairs at its last column and row.
+    x0 = int(lx + 0.2f * (hx - lx)), y0 = int(ly + 0.2f * (hy - ly));
+    w = int(hx - 0.2f * (hx - lx)) - x0, h = int(hy - 0.2f * (hy - ly)) - y0;
+    tri.assign(size_t(w * h), -1);
+    pre.assign(size_t(w * h), PixelAttr{0.f, {0.f, 0.f, 0.f}, 0.f});
+    std::vector<float> depth(size_t(w * h), 1e9f);
+    for (int t = 0; t < M.num_triangles; ++t) {
+      if (area[size_t(t)] == 0.f) continue;
+      const int* v = M.triangles + 3 * t;
+      const Vec2f s[3] = {pix[size_t(v[0])], pix[size_t(v[1])], pix[size_t(v[2])]};
+      const float z = (cam[size_t(v[0])].z + cam[size_t(v[1])].z + cam[size_t(v[2])].z) / 3.f;
+      for (int y = 0; y < h; ++y)
+        for (int x = 0; x < w; ++x) {
+          const Vec2f c{float(x0 + x), float(y0 + y)};
+          const float sign = area[size_t(t)] > 0.f ? 1.f : -1.f;
+          bool inside = true;
+          for (int k = 0; k < 3; ++k) inside = inside && sign * edge_function(s[k], s[(k + 1) % 3], c) >= 0.f;
+          const size_t q = size_t(y * w + x);
+          if (inside && z < depth[q]) depth[q] = z, tri[q] = t, pre[q] = PixelAttr{1.f, {0.5f, 0.5f, 0.5f}, z};
+        }
+    }
+  }
+};
+
+bool same_event(const BlendEvent& a, const BlendEvent& b) {
+  const auto& x = a.src_bary;
+  const auto& y = b.src_bary;
+  bool same = a.to == b.to && same_bits(a.w, b.w) && same_bits(a.dw_dt, b.dw_dt) && a.tri == b.tri &&
+              a.edge == b.edge && a.src_tri == b.src_tri && x.clamped == y.clamped && same_bits(x.s, y.s);
+  for (const auto& [p, q] : {std::make_pair(a.pf, b.pf), std::make_pair(a.po, b.po), std::make_pair(a.p_to, b.p_to)})
+    same = same && same_bits(p.x, q.x) && same_bits(p.y, q.y);
+  same = same && same_bits(a.from.cov, b.from.cov) && same_bits(a.from.d, b.from.d);
+  for (int k = 0; k < 3; ++k)
+    same = same && same_bits(a.from.c[k], b.from.c[k]) && same_bits(x.raw[k], y.raw[k]) && same_bits(x.b[k], y.b[k]);
+  const float g[6] = {x.dcdu.x, x.dcdu.y, x.dcdu.z, x.dcdv.x, x.dcdv.y, x.dcdv.z};
+  const float f[6] = {y.dcdu.x, y.dcdu.y, y.dcdu.z, y.dcdv.x, y.dcdv.y, y.dcdv.z};
+  for (int k = 0; k < 6; ++k) same = same && same_bits(g[k], f[k]);
+  return same;
+}
+
+TEST(SimdRows, ABlendRowGivesThePixelKernelsEventsBitForBit) {
+  std::mt19937 rng(13);
+  long pairs = 0, events = 0, rows = 0;
+  for (float focal : {300.f, 180.f, 110.f}) {
+    BlendScene sc(focal, rng);
+    const size_t n_px = sc.tri.size();
+    // The one-pixel kernel's events (BlendDetectStage::pixel()).
+    std::vector<BlendEvent> want(2 * n_px);
+    std::vector<unsigned char> want_has(2 * n_px, 0);
+    for (int y = 0; y < sc.h; ++y)
+      for (int x = 0; x < sc.w; ++x)
+        for (int dir = 0; dir < 2; ++dir) {
+          const int a = y * sc.w + x, b = dir == 0 ? a + 1 : a + sc.w;
+          if (dir == 0 ? x + 1 >= sc.w : y + 1 >= sc.h) continue;
+          const Vec2f pa{float(sc.x0 + x), float(sc.y0 + y)};
+          const Vec2f pb = dir == 0 ? Vec2f{pa.x + 1.f, pa.y} : Vec2f{pa.x, pa.y + 1.f};
+          pairs += sc.tri[size_t(a)] != sc.tri[size_t(b)];
+          want_has[size_t(2 * a + dir)] =
+              discontinuity_blend(sc.M, sc.G, sc.K, a, sc.tri[size_t(a)], sc.pre[size_t(a)].d, pa, b,
+                                  sc.tri[size_t(b)], sc.pre[size_t(b)].d, pb, dir == 0, &want[size_t(2 * a + dir)]);
+          events += want_has[size_t(2 * a + dir)];
+        }
+    // Spans of every row: those ending at the region's last column, of every length up to 70 (so that whole
+    // vectors reach that column, whatever their width), and three more anywhere.
+    for (int y = 0; y < sc.h; ++y) {
+      std::uniform_int_distribution<int> lo_of(0, sc.w - 1);
+      for (int rep = 0; rep < std::min(sc.w, 70) + 3; ++rep) {
+        const int lo = rep < std::min(sc.w, 70) ? sc.w - 1 - rep : lo_of(rng);
+        const int hi = rep < std::min(sc.w, 70) ? sc.w - 1 : std::uniform_int_distribution<int>(lo, sc.w - 1)(rng);
+        std::vector<BlendEvent> got(2 * n_px);
+        std::vector<unsigned char> has(2 * n_px, 7);
+        const BlendRow r{sc.M, sc.G, sc.K, sc.tri.data(), sc.pre.data(), got.data(), has.data(), y * sc.w + lo,
+                         sc.w, sc.w - 1 - lo, y + 1 < sc.h, sc.x0 + lo, float(sc.y0 + y), hi - lo + 1};
+        const int done = blend_row(r);
+        ASSERT_LE(done, hi - lo + 1);
+        for (int i = 0; i < hi - lo + 1; ++i)
+          for (int dir = 0; dir < 2; ++dir) {
+            const size_t slot = size_t(2 * (y * sc.w + lo + i) + dir);
+            if (i >= done) {
+              ASSERT_EQ(has[slot], 7) << "the rest is the caller's";
+              continue;
+            }
+            ASSERT_EQ(has[slot], want_has[slot]) << "pixel " << lo + i << ", row " << y << ", direction " << dir;
+            if (has[slot]) ASSERT_TRUE(same_event(got[slot], want[slot])) << "pixel " << lo + i << ", row " << y;
+          }
+        ++rows;
+      }
+    }
+  }
+  EXPECT_GT(pairs, 2500);
+  EXPECT_GT(events, 600);
+  std::printf("%ld rows, %ld pairs of different triangles, %ld events\n", rows, pairs, events);
 }
 
 }  // namespace

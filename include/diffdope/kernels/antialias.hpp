@@ -13,42 +13,6 @@
 
 namespace diffdope {
 
-/// Which edge of triangle s[3] (edge k: s[k] -> s[k+1]) the line pf -> po leaves it through before reaching
-/// po, or -1 when po is inside. Each edge whose function decreases along the segment bounds it from above at
-/// t_k = ef / (ef - eo); the exit is the smallest such bound. Works for triangles that do not contain pf too
-/// (walking across a surface). `orient` = sign of the triangle's signed area.
-DD_HOST_DEVICE int exit_edge(const Vec2f s[3], float orient, Vec2f pf, Vec2f po, float* t_out) {
-  int best = -1;
-  float best_t = 2.f;
-  for (int k = 0; k < 3; ++k) {
-    const Vec2f a = s[k], b = s[(k + 1) % 3];
-    const float ef = orient * edge_function(a, b, pf);
-    const float eo = orient * edge_function(a, b, po);
-    if (eo < 0.f && eo < ef) {
-      const float t = ef / (ef - eo);
-      if (t < best_t) {
-        best_t = t;
-        best = k;
-      }
-    }
-  }
-  *t_out = best_t;
-  return best;
-}
-
-/// True when edge a->b is a contour between triangles whose third vertices are opp_f and opp_n: the surface
-/// folds over (both on the same side of the edge line). Independent of winding, so inconsistently wound
-/// meshes do not produce false silhouettes.
-DD_HOST_DEVICE bool is_fold(Vec2f a, Vec2f b, Vec2f opp_f, Vec2f opp_n) {
-  return edge_function(a, b, opp_f) * edge_function(a, b, opp_n) >= 0.f;
-}
-
-/// True when the edge should be antialiased along a horizontal (or vertical) pixel pair.
-DD_HOST_DEVICE bool edge_matches_pair_direction(Vec2f a, Vec2f b, bool horizontal_pair) {
-  const float dx = fabsf(b.x - a.x), dy = fabsf(b.y - a.y);
-  return horizontal_pair ? dy >= dx : dx > dy;
-}
-
 /// Backward of t = ef / (ef - eo) (edge functions of a->b at pf and po): adds dL/da, dL/db given dL/dt.
 DD_HOST_DEVICE void crossing_backward(Vec2f a, Vec2f b, Vec2f pf, Vec2f po, float g_t, Vec2f* g_a, Vec2f* g_b) {
   const float ef = edge_function(a, b, pf);

@@ -38,6 +38,7 @@ struct ScalarLanes {
 
   DD_HOST_DEVICE static I seti(int x) { return x; }
   DD_HOST_DEVICE static M lti(I a, I b) { return a < b; }
+  DD_HOST_DEVICE static M eqi(I a, I b) { return a == b; }
   DD_HOST_DEVICE static I selecti(M m, I a, I b) { return m ? a : b; }
   DD_HOST_DEVICE static V to_float(I a) { return float(a); }
   /// Rounds toward zero; the caller keeps a within the int range.
@@ -45,6 +46,7 @@ struct ScalarLanes {
 
   DD_HOST_DEVICE static V gather(const float* base, I i) { return base[i]; }
   DD_HOST_DEVICE static I gather(const int* base, I i) { return base[i]; }
+  DD_HOST_DEVICE static I gather(const unsigned char* base, I i) { return base[i]; }
 
   using Level = TextureLevelView;
   DD_HOST_DEVICE static Level level(const TextureView* textures, I tex, I lv) { return textures[tex].level[lv]; }

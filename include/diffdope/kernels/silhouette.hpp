@@ -46,39 +46,13 @@ DD_HOST_DEVICE PixelAttr surface_attr(const MeshView& M, const ProjectedView& G,
   return PixelAttr{1.f, {c.x, c.y, c.z}, d};
 }
 
-/// Decides whether pixels a and b (neighbours; `horizontal` = a is left of b, else a is above b) straddle a
-/// discontinuity edge, and fills the blend event if so. tri_* = -1 means not covered; z_* = depth.
-DD_HOST_DEVICE bool discontinuity_blend(const MeshView& M, const ProjectedView& G, const Intrinsics& K, int idx_a,
-                                        int tri_a, float z_a, Vec2f pa, int idx_b, int tri_b, float z_b, Vec2f pb,
-                                        bool horizontal, BlendEvent* ev) {
-  if (tri_a == tri_b) return false;
-  const bool a_front = tri_b < 0 || (tri_a >= 0 && z_a <= z_b);
-  const int F = a_front ? tri_a : tri_b;
-  const Vec2f pf = a_front ? pa : pb, po = a_front ? pb : pa;
-  // Walk across the surface from F along f -> o until the segment crosses a discontinuity edge, or reaches o
-  // (none between the two pixels). Small triangles make the walk necessary.
-  int C = F, k = -1;
-  float t = 0.f;
-  Vec2f s[3];
-  for (int step = 0;; ++step) {
-    if (step == kMaxSilhouetteWalk) return false;
-    const int* v = M.triangles + 3 * C;
-    s[0] = G.pix[v[0]], s[1] = G.pix[v[1]], s[2] = G.pix[v[2]];
-    k = exit_edge(s, signf(G.tri_area[C]), pf, po, &t);
-    if (k < 0) return false;
-    const int N = M.neighbors[3 * C + k];
-    if (N < 0 || G.tri_area[N] == 0.f) break;                                               // border
-    if (is_fold(s[k], s[(k + 1) % 3], s[(k + 2) % 3], G.pix[M.opposite[3 * C + k]])) break;  // contour
-    // A colour seam is blended by the pair direction it faces; otherwise the walk goes on across it.
-    if (M.seams[3 * C + k] && edge_matches_pair_direction(s[k], s[(k + 1) % 3], horizontal)) break;
-    // The walk reached the triangle o's centre lies in (the common case of two pixels on adjacent triangles of
-    // one smooth surface): nothing between them to blend, without walking that triangle too.
-    if (N == (a_front ? tri_b : tri_a)) return false;
-    C = N;
-  }
-  if (!edge_matches_pair_direction(s[k], s[(k + 1) % 3], horizontal)) return false;
-  const int idx_f = a_front ? idx_a : idx_b, idx_o = a_front ? idx_b : idx_a;
-  const int tri_o = a_front ? tri_b : tri_a;
+#include "diffdope/kernels/silhouette_lanes.inc"
+
+/// The blend a walk found (silhouette_walk_lanes: edge k of triangle C, crossed at t along pf -> po), given the
+/// pair: the near side's pixel f (index idx_f) and the other, o (idx_o, its triangle tri_o, -1 = none).
+DD_HOST_DEVICE void blend_at_crossing(const MeshView& M, const ProjectedView& G, const Intrinsics& K, int idx_f,
+                                      Vec2f pf, int idx_o, int tri_o, Vec2f po, int C, int k, float t,
+                                      BlendEvent* ev) {
   if (t > 0.5f) {  // the near side's surface (C, continued to o's centre) covers part of o
     *ev = BlendEvent{idx_o, t - 0.5f, 1.f, C, k, C, pf, po, po, {}, {}};
     ev->from = surface_attr(M, G, K, C, po, &ev->src_bary);
@@ -86,6 +60,33 @@ DD_HOST_DEVICE bool discontinuity_blend(const MeshView& M, const ProjectedView& 
     *ev = BlendEvent{idx_f, 0.5f - t, -1.f, C, k, tri_o, pf, po, pf, {}, {}};
     ev->from = surface_attr(M, G, K, tri_o, pf, &ev->src_bary);
   }
+}
+
+/// The near side of a pair of neighbouring pixels a and b with different triangles (tri_* = -1: not covered;
+/// z_* = depth): a when b is empty or a is nearer.
+DD_HOST_DEVICE bool a_in_front(int tri_a, float z_a, int tri_b, float z_b) {
+  return tri_b < 0 || (tri_a >= 0 && z_a <= z_b);
+}
+
+/// Decides whether pixels a and b (neighbours; `horizontal` = a is left of b, else a is above b) straddle a
+/// discontinuity edge, and fills the blend event if so (nothing written otherwise). tri_* = -1 means not
+/// covered; z_* = depth.
+DD_HOST_DEVICE bool discontinuity_blend(const MeshView& M, const ProjectedView& G, const Intrinsics& K, int idx_a,
+                                        int tri_a, float z_a, Vec2f pa, int idx_b, int tri_b, float z_b, Vec2f pb,
+                                        bool horizontal, BlendEvent* ev) {
+  if (tri_a == tri_b) return false;
+  const bool a_front = a_in_front(tri_a, z_a, tri_b, z_b);
+  const Vec2f pf = a_front ? pa : pb, po = a_front ? pb : pa;
+  const int tri_o = a_front ? tri_b : tri_a;
+  // Small triangles make a walk across the surface necessary: the edge between the two centres may belong to
+  // a triangle neither of them lies in.
+  int C, k;
+  float t;
+  bool unfinished;
+  if (!silhouette_walk_lanes<ScalarLanes>(M, G, a_front ? tri_a : tri_b, tri_o, pf.x, pf.y, po.x, po.y, true,
+                                          horizontal, 0, kMaxSilhouetteWalk, &C, &k, &t, &unfinished))
+    return false;
+  blend_at_crossing(M, G, K, a_front ? idx_a : idx_b, pf, a_front ? idx_b : idx_a, tri_o, po, C, k, t, ev);
   return true;
 }
 
