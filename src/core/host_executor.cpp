@@ -252,7 +252,9 @@ class HostExec {
       for (int ly = y0; ly < y1; ++ly)
         for (int lx = first_by_rows(s.stage, ly, 0, w - 1, h); lx < w; ++lx) s.stage.pixel(lx, ly, ly * w + lx, h);
     } else {
-      for (int i = slice_begin(n, part, parts), end = slice_begin(n, part + 1, parts); i < end; ++i) s.stage(i, h);
+      const int first = slice_begin(n, part, parts), end = slice_begin(n, part + 1, parts);
+      if constexpr (pipeline::has_batches<Stage>::value) s.stage.batch(first, end, h);
+      else for (int i = first; i < end; ++i) s.stage(i, h);
       if constexpr (std::is_same<Stage, pipeline::RasterStage>::value)
         if (near) near->compute(s.stage.p, h);
     }

@@ -62,6 +62,17 @@ struct has_rows<Stage, decltype(void(Stage::kRows))> {
   static constexpr bool value = Stage::kRows;
 };
 
+/// Whether an element stage also runs a range of its elements at once on the host: batch(first, end, h) does
+/// elements first .. end - 1 as operator() does each; the CPU executor then calls it instead of operator().
+template <class Stage, class = void>
+struct has_batches {
+  static constexpr bool value = false;
+};
+template <class Stage>
+struct has_batches<Stage, decltype(void(Stage::kBatches))> {
+  static constexpr bool value = Stage::kBatches;
+};
+
 /// One object of a call: its mesh on the executor and, when evaluating, its loss constants and mask.
 struct ObjectParams {
   MeshView M;
@@ -242,13 +253,25 @@ struct RasterStage {
     const ObjectParams& o = p.objects[hy.object];
     if (t >= o.nt || !hy.valid || p.area[hy.triangle_offset + t] == 0.f) return;
     const Vec2f* P = p.pix + hy.vertex_offset;
+    const int* v = o.M.triangles + 3 * t;
+    const Vec2f s[3] = {P[v[0]], P[v[1]], P[v[2]]};
+    int x0, x1, y0, y1;  // covers no pixel centre of the region: nothing to set up
+    raster_bounds(s, &x0, &x1, &y0, &y1);
+    if (imax(hy.x0, x0) > imin(hy.x0 + hy.w - 1, x1) || imax(hy.y0, y0) > imin(hy.y0 + hy.h - 1, y1)) return;
+    draw(t, band, x0, x1, y0, y1, h);
+  }
+
+  /// Band `band` of triangle t (drawn: area != 0), whose pixel bounds x0 .. y1 (raster_bounds()) meet the region.
+  DD_HOST_DEVICE void draw(int t, int band, int x0, int x1, int y0, int y1, int h) const {
+    const Hypothesis& hy = p.H[h];
+    const ObjectParams& o = p.objects[hy.object];
+    const Vec2f* P = p.pix + hy.vertex_offset;
     const Vec3f* X = p.cam + hy.vertex_offset;
     const int* v = o.M.triangles + 3 * t;
     const Vec2f s[3] = {P[v[0]], P[v[1]], P[v[2]]};
-    TriangleRaster R;  // covers no pixel centre of the region: nothing to set up
-    raster_bounds(s, &R.x0, &R.x1, &R.y0, &R.y1);
-    if (imax(hy.x0, R.x0) > imin(hy.x0 + hy.w - 1, R.x1) || imax(hy.y0, R.y0) > imin(hy.y0 + hy.h - 1, R.y1)) return;
     const float z[3] = {X[v[0]].z, X[v[1]].z, X[v[2]].z};
+    TriangleRaster R;
+    R.x0 = x0, R.x1 = x1, R.y0 = y0, R.y1 = y1;
     if (!triangle_raster_setup(s, z, &R)) return;
     const int xs = imax(hy.x0, R.x0), xe = imin(hy.x0 + hy.w - 1, R.x1);
     const int y_first = imax(hy.y0, R.y0), y_last = imin(hy.y0 + hy.h - 1, R.y1);
@@ -271,6 +294,28 @@ struct RasterStage {
       }
     }
   }
+#if !defined(__CUDACC__)
+  /// Triangles first .. end - 1 (one band each): SIMD vectors find those drawn whose bounds meet the region
+  /// (on a dense mesh most of the others lie between pixel centres), then draw() draws each of them.
+  static constexpr bool kBatches = true;
+  void batch(int first, int end, int h) const {
+    const Hypothesis& hy = p.H[h];
+    if (!hy.valid) return;
+    if (bands != 1) {
+      for (int i = first; i < end; ++i) (*this)(i, h);
+      return;
+    }
+    const ObjectParams& o = p.objects[hy.object];
+    constexpr int kChunk = 256;
+    int t[kChunk], x0[kChunk], x1[kChunk], y0[kChunk], y1[kChunk];
+    for (int c = first; c < imin(end, o.nt); c += kChunk) {
+      const RasterCandidates rc{o.M.triangles, p.pix + hy.vertex_offset, p.area + hy.triangle_offset, c,
+                                imin(c + kChunk, imin(end, o.nt)), hy.x0, hy.x0 + hy.w - 1, hy.y0, hy.y0 + hy.h - 1};
+      const int n = raster_candidates(rc, t, x0, x1, y0, y1);
+      for (int k = 0; k < n; ++k) draw(t[k], 0, x0[k], x1[k], y0[k], y1[k], h);
+    }
+  }
+#endif
 };
 
 /// What a pixel stage does at a pixel with no covered pixel within one pixel of it (in its row or the rows above

@@ -104,6 +104,7 @@ struct HwyLanes {
 
 // The kernels built for this target (their definitions must lie inside the target's region).
 #include "diffdope/kernels/pixel_loss_lanes.inc"
+#include "diffdope/kernels/raster_lanes.inc"
 #include "diffdope/kernels/texture_lanes.inc"
 #include "diffdope/kernels/shade_lanes.inc"
 #include "diffdope/kernels/silhouette_lanes.inc"
@@ -299,6 +300,49 @@ int BlendRowImpl(const BlendRow& r) {
   return r.n;
 }
 
+int RasterCandidatesImpl(const RasterCandidates& c, int* out_t, int* out_x0, int* out_x1, int* out_y0,
+                         int* out_y1) {
+  const DF d;
+  const DI di;
+  using V = HwyLanes::V;
+  using I = HwyLanes::I;
+  const int N = int(hn::Lanes(d));
+  const I three = hn::Set(di, 3), one = hn::Set(di, 1), two = hn::Set(di, 2);
+  const I rx0 = hn::Set(di, c.rx0), rx1 = hn::Set(di, c.rx1), ry0 = hn::Set(di, c.ry0), ry1 = hn::Set(di, c.ry1);
+  const float* pix = &c.pix[0].x;
+  int n = 0, t = c.first;
+  for (; t + N <= c.end; t += N) {
+    const auto drawn = hn::RebindMask(di, hn::Ne(hn::LoadU(d, c.area + t), hn::Zero(d)));
+    if (hn::AllFalse(di, drawn)) continue;
+    const I tri = hn::Add(hn::Set(di, t), hn::Iota(di, 0));
+    const I v[3] = {HwyLanes::gather(c.triangles, three * tri), HwyLanes::gather(c.triangles, three * tri + one),
+                    HwyLanes::gather(c.triangles, three * tri + two)};
+    V sx[3], sy[3];
+    for (int k = 0; k < 3; ++k) sx[k] = HwyLanes::gather(pix, two * v[k]), sy[k] = HwyLanes::gather(pix, two * v[k] + one);
+    I x0, x1, y0, y1;
+    HWY_NAMESPACE::raster_bounds_lanes<HwyLanes>(sx, sy, &x0, &x1, &y0, &y1);
+    // As RasterStage::operator(): the bounds clipped to the region hold a pixel centre.
+    const auto misses = hn::Or(hn::Gt(hn::Max(rx0, x0), hn::Min(rx1, x1)), hn::Gt(hn::Max(ry0, y0), hn::Min(ry1, y1)));
+    const auto keep = hn::AndNot(misses, drawn);
+    hn::CompressStore(x0, keep, di, out_x0 + n);
+    hn::CompressStore(x1, keep, di, out_x1 + n);
+    hn::CompressStore(y0, keep, di, out_y0 + n);
+    hn::CompressStore(y1, keep, di, out_y1 + n);
+    n += int(hn::CompressStore(tri, keep, di, out_t + n));
+  }
+  for (; t < c.end; ++t) {  // the last partial vector, one triangle at a time
+    if (c.area[t] == 0.f) continue;
+    const int* v = c.triangles + 3 * t;
+    const Vec2f s[3] = {c.pix[v[0]], c.pix[v[1]], c.pix[v[2]]};
+    int x0, x1, y0, y1;
+    raster_bounds(s, &x0, &x1, &y0, &y1);
+    if (std::max(c.rx0, x0) > std::min(c.rx1, x1) || std::max(c.ry0, y0) > std::min(c.ry1, y1)) continue;
+    out_t[n] = t, out_x0[n] = x0, out_x1[n] = x1, out_y0[n] = y0, out_y1[n] = y1;
+    ++n;
+  }
+  return n;
+}
+
 const char* TargetName() { return hwy::TargetName(HWY_TARGET); }
 
 }  // namespace HWY_NAMESPACE
@@ -310,11 +354,15 @@ namespace diffdope {
 HWY_EXPORT(LossRowImpl);
 HWY_EXPORT(ShadeRowImpl);
 HWY_EXPORT(BlendRowImpl);
+HWY_EXPORT(RasterCandidatesImpl);
 HWY_EXPORT(TargetName);
 
 int loss_row(const LossRow& row, double sum[3]) { return HWY_DYNAMIC_DISPATCH(LossRowImpl)(row, sum); }
 int shade_row(const ShadeRow& row) { return HWY_DYNAMIC_DISPATCH(ShadeRowImpl)(row); }
 int blend_row(const BlendRow& row) { return HWY_DYNAMIC_DISPATCH(BlendRowImpl)(row); }
+int raster_candidates(const RasterCandidates& c, int* t, int* x0, int* x1, int* y0, int* y1) {
+  return HWY_DYNAMIC_DISPATCH(RasterCandidatesImpl)(c, t, x0, x1, y0, y1);
+}
 const char* simd_row_target() { return HWY_DYNAMIC_DISPATCH(TargetName)(); }
 }  // namespace diffdope
 #endif

@@ -64,6 +64,20 @@ struct BlendRow {
 /// finished one pair at a time); returns n.
 int blend_row(const BlendRow& row);
 
+/// Triangles of a hypothesis for the raster (pipeline::RasterStage): those drawn (area != 0) whose bounding box of
+/// pixel centres (raster_bounds()) meets the region [rx0, rx1] x [ry0, ry1].
+struct RasterCandidates {
+  const int* triangles;  // 3 vertex indices per triangle
+  const Vec2f* pix;      // projected vertices
+  const float* area;     // signed pixel area per triangle (0: not drawn)
+  int first, end;        // the triangles looked at: first .. end - 1
+  int rx0, rx1, ry0, ry1;  // the region's pixels (inclusive)
+};
+
+/// Writes the candidates among the triangles looked at, in order, into t and their bounds into x0 .. y1 (room
+/// for end - first each); returns how many there are.
+int raster_candidates(const RasterCandidates& c, int* t, int* x0, int* x1, int* y0, int* y1);
+
 /// The instruction set the rows run on here (e.g. "AVX3", "AVX2", "SSE4"; for the profile and the README).
 const char* simd_row_target();
 

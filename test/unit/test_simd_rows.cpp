@@ -1,7 +1,8 @@
 // The CPU's SIMD rows against their one-pixel kernels, bit for bit, over rows of every length around the vector
 // width: loss_row() against pixel_loss_step() (every value, gradient and sum, over the cases the formula
 // distinguishes), shade_row() against shade_pixel() (triangle, attributes, barycentrics, texture derivatives),
-// blend_row() against discontinuity_blend() (every event slot, every field of every event).
+// blend_row() against discontinuity_blend() (every event slot, every field of every event), raster_candidates()
+// against raster_bounds() (which triangles, their bounds).
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -328,6 +329,48 @@ TEST(SimdRows, ABlendRowGivesThePixelKernelsEventsBitForBit) {
   EXPECT_GT(pairs, 2500);
   EXPECT_GT(events, 600);
   std::printf("%ld rows, %ld pairs of different triangles, %ld events\n", rows, pairs, events);
+}
+
+TEST(SimdRows, RasterCandidatesAreTheTrianglesWhoseBoundsMeetTheRegion) {
+  std::mt19937 rng(17);
+  std::uniform_real_distribution<float> u(0.f, 1.f);
+  long candidates = 0, looked_at = 0;
+  for (float focal : {600.f, 110.f}) {  // triangles of a few pixels, and mostly between pixel centres
+    BlendScene sc(focal, rng);
+    std::vector<float> area = sc.area;
+    for (float& a : area) a = u(rng) < 0.2f ? 0.f : a;  // culled or clipped
+    std::vector<Vec2f> pix = sc.pix;
+    for (Vec2f& p : pix)  // now and then far outside the image (clamped to +-2^30 when made ints)
+      if (u(rng) < 0.01f) p.x = u(rng) < 0.5f ? -3e9f : 5e9f;
+    for (int rep = 0; rep < 40; ++rep) {
+      const int rx0 = sc.x0 - 5 + int(u(rng) * float(sc.w)), ry0 = sc.y0 - 5 + int(u(rng) * float(sc.h));
+      const int rx1 = rx0 + int(u(rng) * float(sc.w)), ry1 = ry0 + int(u(rng) * float(sc.h));
+      const int first = int(u(rng) * 40.f), end = rep % 4 == 0 ? sc.M.num_triangles : first + int(u(rng) * 300.f);
+      const RasterCandidates c{sc.M.triangles, pix.data(), area.data(), first, end, rx0, rx1, ry0, ry1};
+      const size_t room = size_t(end - first);
+      std::vector<int> t(room), x0(room), x1(room), y0(room), y1(room);
+      const int n = raster_candidates(c, t.data(), x0.data(), x1.data(), y0.data(), y1.data());
+      int k = 0;
+      for (int tri = first; tri < end; ++tri) {  // as RasterStage::operator() picks them
+        if (area[size_t(tri)] == 0.f) continue;
+        const int* v = sc.M.triangles + 3 * tri;
+        const Vec2f s[3] = {pix[size_t(v[0])], pix[size_t(v[1])], pix[size_t(v[2])]};
+        int b[4];
+        raster_bounds(s, &b[0], &b[1], &b[2], &b[3]);
+        if (std::max(rx0, b[0]) > std::min(rx1, b[1]) || std::max(ry0, b[2]) > std::min(ry1, b[3])) continue;
+        ASSERT_LT(k, n) << "triangle " << tri << " is missing";
+        ASSERT_EQ(t[size_t(k)], tri);
+        ASSERT_TRUE(x0[size_t(k)] == b[0] && x1[size_t(k)] == b[1] && y0[size_t(k)] == b[2] && y1[size_t(k)] == b[3])
+            << "bounds of triangle " << tri;
+        ++k;
+      }
+      ASSERT_EQ(n, k);
+      candidates += n;
+      looked_at += end - first;
+    }
+  }
+  EXPECT_GT(candidates, 1000);
+  EXPECT_LT(candidates, looked_at / 2);
 }
 
 }  // namespace

@@ -1,5 +1,6 @@
 #pragma once
 // Triangle coverage, depth and perspective-correct barycentrics, with their backward passes.
+#include "diffdope/kernels/lanes.hpp"
 #include "diffdope/kernels/vec.hpp"
 
 namespace diffdope {
@@ -53,31 +54,15 @@ struct TriangleRaster {
   int x0, x1, y0, y1;   // pixel bounding box (inclusive, not clipped to the image)
 };
 
-/// floor / ceil of a finite pixel coordinate as an int, clamped to +-2^30 (far outside any image). On the host
-/// without SSE4.1 (the portable default build) floorf / ceilf are slow sequences: a truncation and a fix-up
-/// compare give the same integers.
+/// Pixel coordinates are clamped to +-2^30 before they become ints (raster_lanes.inc).
 constexpr float kMaxCoordinate = 1073741824.f;
-DD_HOST_DEVICE int floor_to_int(float x) {
-  x = clampf(x, -kMaxCoordinate, kMaxCoordinate);
-  const int i = static_cast<int>(x);  // truncates towards zero
-  return i - (static_cast<float>(i) > x ? 1 : 0);
-}
-DD_HOST_DEVICE int ceil_to_int(float x) {
-  x = clampf(x, -kMaxCoordinate, kMaxCoordinate);
-  const int i = static_cast<int>(x);
-  return i + (static_cast<float>(i) < x ? 1 : 0);
-}
 
-/// Pixel bounding box (inclusive) of the pixel centres the triangle can cover; empty (x0 > x1 or y0 > y1) for a
-/// triangle between pixel centres, which a dense mesh far away mostly has: those skip the fixed-point set-up.
-/// (Plain comparisons instead of fminf / fmaxf, which are library calls on the host; the positions are finite.)
+#include "diffdope/kernels/raster_lanes.inc"
+
+/// raster_bounds_lanes() of one triangle (s: its pixel positions).
 DD_HOST_DEVICE void raster_bounds(const Vec2f s[3], int* x0, int* x1, int* y0, int* y1) {
-  const float lx = s[0].x < s[1].x ? s[0].x : s[1].x, hx = s[0].x > s[1].x ? s[0].x : s[1].x;
-  const float ly = s[0].y < s[1].y ? s[0].y : s[1].y, hy = s[0].y > s[1].y ? s[0].y : s[1].y;
-  *x0 = ceil_to_int(lx < s[2].x ? lx : s[2].x);
-  *x1 = floor_to_int(hx > s[2].x ? hx : s[2].x);
-  *y0 = ceil_to_int(ly < s[2].y ? ly : s[2].y);
-  *y1 = floor_to_int(hy > s[2].y ? hy : s[2].y);
+  const float sx[3] = {s[0].x, s[1].x, s[2].x}, sy[3] = {s[0].y, s[1].y, s[2].y};
+  raster_bounds_lanes<ScalarLanes>(sx, sy, x0, x1, y0, y1);
 }
 
 /// s: pixel positions, z: camera depths of the three vertices; r's x0 .. y1 must hold raster_bounds(s) already
