@@ -270,13 +270,26 @@ struct RasterStage {
     const int* v = o.M.triangles + 3 * t;
     const Vec2f s[3] = {P[v[0]], P[v[1]], P[v[2]]};
     const float z[3] = {X[v[0]].z, X[v[1]].z, X[v[2]].z};
+    const int xs = imax(hy.x0, x0), xe = imin(hy.x0 + hy.w - 1, x1);
+    const int y_first = imax(hy.y0, y0), y_last = imin(hy.y0 + hy.h - 1, y1);
+    const int rows = (y_last - y_first + bands) / bands;  // ceil(rows / bands)
+    const int ys = y_first + band * rows, ye = imin(y_last, ys + rows - 1);
+    if (x1 - x0 < kSmallTriangleCentres && y1 - y0 < kSmallTriangleCentres) {  // 32-bit set-up, the same bits
+      const float sx[3] = {s[0].x, s[1].x, s[2].x}, sy[3] = {s[0].y, s[1].y, s[2].y};
+      const SmallTriangleLanes<ScalarLanes> T = raster_small_setup_lanes<ScalarLanes>(sx, sy, z);
+      if (!T.drawn) return;
+      for (int y = ys; y <= ye; ++y)
+        for (int x = xs; x <= xe; ++x) {
+          float iz;
+          if (!raster_small_centre_lanes<ScalarLanes>(T, x, y, &iz) || !(iz > 0.f)) continue;
+          key_min(p.key + (hy.offset + (y - hy.y0) * hy.w + x - hy.x0),
+                  (static_cast<unsigned long long>(depth_key(iz)) << 32) | unsigned(t));
+        }
+      return;
+    }
     TriangleRaster R;
     R.x0 = x0, R.x1 = x1, R.y0 = y0, R.y1 = y1;
     if (!triangle_raster_setup(s, z, &R)) return;
-    const int xs = imax(hy.x0, R.x0), xe = imin(hy.x0 + hy.w - 1, R.x1);
-    const int y_first = imax(hy.y0, R.y0), y_last = imin(hy.y0 + hy.h - 1, R.y1);
-    const int rows = (y_last - y_first + bands) / bands;  // ceil(rows / bands)
-    const int ys = y_first + band * rows, ye = imin(y_last, ys + rows - 1);
     long long e_row[3];  // the edge functions at (xs, y), stepped exactly from row to row
     raster_edges_at(R, xs, ys, e_row);
     for (int y = ys; y <= ye; ++y, e_row[0] += R.dy[0], e_row[1] += R.dy[1], e_row[2] += R.dy[2]) {
@@ -295,8 +308,8 @@ struct RasterStage {
     }
   }
 #if !defined(__CUDACC__)
-  /// Triangles first .. end - 1 (one band each): SIMD vectors find those drawn whose bounds meet the region
-  /// (on a dense mesh most of the others lie between pixel centres), then draw() draws each of them.
+  /// Triangles first .. end - 1 (one band each): SIMD vectors find those drawn whose bounds meet the region (on a
+  /// dense mesh most of the others lie between pixel centres) and draw the small ones; draw() draws the rest.
   static constexpr bool kBatches = true;
   void batch(int first, int end, int h) const {
     const Hypothesis& hy = p.H[h];
@@ -309,9 +322,10 @@ struct RasterStage {
     constexpr int kChunk = 256;
     int t[kChunk], x0[kChunk], x1[kChunk], y0[kChunk], y1[kChunk];
     for (int c = first; c < imin(end, o.nt); c += kChunk) {
-      const RasterCandidates rc{o.M.triangles, p.pix + hy.vertex_offset, p.area + hy.triangle_offset, c,
-                                imin(c + kChunk, imin(end, o.nt)), hy.x0, hy.x0 + hy.w - 1, hy.y0, hy.y0 + hy.h - 1};
-      const int n = raster_candidates(rc, t, x0, x1, y0, y1);
+      const RasterBatch rb{o.M.triangles, p.pix + hy.vertex_offset, p.cam + hy.vertex_offset,
+                           p.area + hy.triangle_offset, c, imin(c + kChunk, imin(end, o.nt)), hy.x0,
+                           hy.x0 + hy.w - 1, hy.y0, hy.y0 + hy.h - 1, p.key + hy.offset};
+      const int n = raster_batch(rb, t, x0, x1, y0, y1);
       for (int k = 0; k < n; ++k) draw(t[k], 0, x0[k], x1[k], y0[k], y1[k], h);
     }
   }

@@ -51,9 +51,11 @@ struct HwyLanes {
   static I seti(int x) { return hn::Set(DI(), x); }
   static M lti(I a, I b) { return hn::RebindMask(DF(), hn::Lt(a, b)); }
   static M eqi(I a, I b) { return hn::RebindMask(DF(), hn::Eq(a, b)); }
+  static I ori(I a, I b) { return hn::Or(a, b); }
   static I selecti(M m, I a, I b) { return hn::IfThenElse(hn::RebindMask(DI(), m), a, b); }
   static V to_float(I a) { return hn::ConvertTo(DF(), a); }
   static I truncate(V a) { return hn::ConvertTo(DI(), a); }
+  static I round(V a) { return hn::NearestInt(a); }
   static V gather(const float* base, I i) { return hn::GatherIndex(DF(), base, i); }
   static I gather(const int* base, I i) { return hn::GatherIndex(DI(), base, i); }
   static I gather(const unsigned char* base, I i) {  // (no byte gather: one lane at a time)
@@ -300,16 +302,21 @@ int BlendRowImpl(const BlendRow& r) {
   return r.n;
 }
 
-int RasterCandidatesImpl(const RasterCandidates& c, int* out_t, int* out_x0, int* out_x1, int* out_y0,
-                         int* out_y1) {
+int RasterBatchImpl(const RasterBatch& c, int* out_t, int* out_x0, int* out_x1, int* out_y0, int* out_y1) {
   const DF d;
   const DI di;
   using V = HwyLanes::V;
   using I = HwyLanes::I;
+  constexpr size_t kMax = HwyLanes::kMaxLanes;
   const int N = int(hn::Lanes(d));
   const I three = hn::Set(di, 3), one = hn::Set(di, 1), two = hn::Set(di, 2);
   const I rx0 = hn::Set(di, c.rx0), rx1 = hn::Set(di, c.rx1), ry0 = hn::Set(di, c.ry0), ry1 = hn::Set(di, c.ry1);
+  const I small_side = hn::Set(di, kSmallTriangleCentres - 1);
+  const int w = c.rx1 - c.rx0 + 1;
   const float* pix = &c.pix[0].x;
+  const float* cam = &c.cam[0].x;
+  HWY_ALIGN int hit_x[kMax], hit_y[kMax], hit[kMax], span_x[kMax], span_y[kMax];
+  HWY_ALIGN float hit_iz[kMax];
   int n = 0, t = c.first;
   for (; t + N <= c.end; t += N) {
     const auto drawn = hn::RebindMask(di, hn::Ne(hn::LoadU(d, c.area + t), hn::Zero(d)));
@@ -322,15 +329,47 @@ int RasterCandidatesImpl(const RasterCandidates& c, int* out_t, int* out_x0, int
     I x0, x1, y0, y1;
     HWY_NAMESPACE::raster_bounds_lanes<HwyLanes>(sx, sy, &x0, &x1, &y0, &y1);
     // As RasterStage::operator(): the bounds clipped to the region hold a pixel centre.
-    const auto misses = hn::Or(hn::Gt(hn::Max(rx0, x0), hn::Min(rx1, x1)), hn::Gt(hn::Max(ry0, y0), hn::Min(ry1, y1)));
+    const I xs = hn::Max(rx0, x0), xe = hn::Min(rx1, x1), ys = hn::Max(ry0, y0), ye = hn::Min(ry1, y1);
+    const auto misses = hn::Or(hn::Gt(xs, xe), hn::Gt(ys, ye));
     const auto keep = hn::AndNot(misses, drawn);
-    hn::CompressStore(x0, keep, di, out_x0 + n);
-    hn::CompressStore(x1, keep, di, out_x1 + n);
-    hn::CompressStore(y0, keep, di, out_y0 + n);
-    hn::CompressStore(y1, keep, di, out_y1 + n);
-    n += int(hn::CompressStore(tri, keep, di, out_t + n));
+    const auto small = hn::And(keep, hn::AndNot(hn::Gt(x1 - x0, small_side), hn::Not(hn::Gt(y1 - y0, small_side))));
+    const auto big = hn::AndNot(small, keep);
+    hn::CompressStore(x0, big, di, out_x0 + n);
+    hn::CompressStore(x1, big, di, out_x1 + n);
+    hn::CompressStore(y0, big, di, out_y0 + n);
+    hn::CompressStore(y1, big, di, out_y1 + n);
+    n += int(hn::CompressStore(tri, big, di, out_t + n));
+    if (hn::AllFalse(di, small)) continue;
+    // The small ones: every centre of their clipped bounds at once (as RasterStage::draw() one triangle at a time).
+    V z[3];
+    for (int k = 0; k < 3; ++k) z[k] = HwyLanes::gather(cam, three * v[k] + two);
+    const SmallTriangleLanes<HwyLanes> T = HWY_NAMESPACE::raster_small_setup_lanes<HwyLanes>(sx, sy, z);
+    const auto live = hn::RebindMask(d, small);
+    hn::Store(hn::IfThenElseZero(small, xe - xs), di, span_x);
+    hn::Store(hn::IfThenElseZero(small, ye - ys), di, span_y);
+    int most_x = 0, most_y = 0;
+    for (int j = 0; j < N; ++j) most_x = std::max(most_x, span_x[j]), most_y = std::max(most_y, span_y[j]);
+    for (int dy = 0; dy <= most_y; ++dy)
+      for (int dx = 0; dx <= most_x; ++dx) {
+        const I px = xs + hn::Set(di, dx), py = ys + hn::Set(di, dy);
+        const auto inside_bounds = hn::RebindMask(d, hn::Not(hn::Or(hn::Gt(px, xe), hn::Gt(py, ye))));
+        V iz;
+        const auto covered = HWY_NAMESPACE::raster_small_centre_lanes<HwyLanes>(T, px, py, &iz);
+        // (only a NaN depth fails iz > 0: vertices are in front of the near plane)
+        const auto draw = hn::And(hn::And(live, inside_bounds), hn::And(covered, hn::Gt(iz, hn::Zero(d))));
+        if (hn::AllFalse(d, draw)) continue;
+        hn::Store(hn::IfThenElseZero(hn::RebindMask(di, draw), one), di, hit);
+        hn::Store(px, di, hit_x);
+        hn::Store(py, di, hit_y);
+        hn::Store(iz, d, hit_iz);
+        for (int j = 0; j < N; ++j)
+          if (hit[j])
+            pipeline::key_min(c.key + size_t(hit_y[j] - c.ry0) * size_t(w) + size_t(hit_x[j] - c.rx0),
+                              (static_cast<unsigned long long>(pipeline::depth_key(hit_iz[j])) << 32) |
+                                  unsigned(t + j));
+      }
   }
-  for (; t < c.end; ++t) {  // the last partial vector, one triangle at a time
+  for (; t < c.end; ++t) {  // the last partial vector: left to the caller
     if (c.area[t] == 0.f) continue;
     const int* v = c.triangles + 3 * t;
     const Vec2f s[3] = {c.pix[v[0]], c.pix[v[1]], c.pix[v[2]]};
@@ -354,14 +393,14 @@ namespace diffdope {
 HWY_EXPORT(LossRowImpl);
 HWY_EXPORT(ShadeRowImpl);
 HWY_EXPORT(BlendRowImpl);
-HWY_EXPORT(RasterCandidatesImpl);
+HWY_EXPORT(RasterBatchImpl);
 HWY_EXPORT(TargetName);
 
 int loss_row(const LossRow& row, double sum[3]) { return HWY_DYNAMIC_DISPATCH(LossRowImpl)(row, sum); }
 int shade_row(const ShadeRow& row) { return HWY_DYNAMIC_DISPATCH(ShadeRowImpl)(row); }
 int blend_row(const BlendRow& row) { return HWY_DYNAMIC_DISPATCH(BlendRowImpl)(row); }
-int raster_candidates(const RasterCandidates& c, int* t, int* x0, int* x1, int* y0, int* y1) {
-  return HWY_DYNAMIC_DISPATCH(RasterCandidatesImpl)(c, t, x0, x1, y0, y1);
+int raster_batch(const RasterBatch& b, int* t, int* x0, int* x1, int* y0, int* y1) {
+  return HWY_DYNAMIC_DISPATCH(RasterBatchImpl)(b, t, x0, x1, y0, y1);
 }
 const char* simd_row_target() { return HWY_DYNAMIC_DISPATCH(TargetName)(); }
 }  // namespace diffdope

@@ -64,19 +64,23 @@ struct BlendRow {
 /// finished one pair at a time); returns n.
 int blend_row(const BlendRow& row);
 
-/// Triangles of a hypothesis for the raster (pipeline::RasterStage): those drawn (area != 0) whose bounding box of
-/// pixel centres (raster_bounds()) meets the region [rx0, rx1] x [ry0, ry1].
-struct RasterCandidates {
+/// Triangles of a hypothesis for the raster (pipeline::RasterStage), on SIMD vectors: of those drawn (area != 0)
+/// whose bounding box of pixel centres (raster_bounds()) meets the region, the small ones (bounds of at most
+/// kSmallTriangleCentres per side) are drawn into the z-buffer here (raster_small_setup_lanes()), the others
+/// are left to the caller.
+struct RasterBatch {
   const int* triangles;  // 3 vertex indices per triangle
   const Vec2f* pix;      // projected vertices
+  const Vec3f* cam;      // camera-space vertices (depth: z)
   const float* area;     // signed pixel area per triangle (0: not drawn)
   int first, end;        // the triangles looked at: first .. end - 1
   int rx0, rx1, ry0, ry1;  // the region's pixels (inclusive)
+  unsigned long long* key;  // the region's z-buffer, row by row (rx1 - rx0 + 1 per row)
 };
 
-/// Writes the candidates among the triangles looked at, in order, into t and their bounds into x0 .. y1 (room
-/// for end - first each); returns how many there are.
-int raster_candidates(const RasterCandidates& c, int* t, int* x0, int* x1, int* y0, int* y1);
+/// Draws the small triangles and writes the others that meet the region, in order, into t and their bounds
+/// into x0 .. y1 (room for end - first each); returns how many it left.
+int raster_batch(const RasterBatch& b, int* t, int* x0, int* x1, int* y0, int* y1);
 
 /// The instruction set the rows run on here (e.g. "AVX3", "AVX2", "SSE4"; for the profile and the README).
 const char* simd_row_target();

@@ -1,8 +1,8 @@
 // The CPU's SIMD rows against their one-pixel kernels, bit for bit, over rows of every length around the vector
 // width: loss_row() against pixel_loss_step() (every value, gradient and sum, over the cases the formula
 // distinguishes), shade_row() against shade_pixel() (triangle, attributes, barycentrics, texture derivatives),
-// blend_row() against discontinuity_blend() (every event slot, every field of every event), raster_candidates()
-// against raster_bounds() (which triangles, their bounds).
+// blend_row() against discontinuity_blend() (every event slot, every field of every event), raster_batch() and
+// the 32-bit raster of small triangles against the 64-bit raster (the z-buffer, which triangles are left).
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -331,11 +331,70 @@ TEST(SimdRows, ABlendRowGivesThePixelKernelsEventsBitForBit) {
   std::printf("%ld rows, %ld pairs of different triangles, %ld events\n", rows, pairs, events);
 }
 
-TEST(SimdRows, RasterCandidatesAreTheTrianglesWhoseBoundsMeetTheRegion) {
+/// The 64-bit raster of raster.hpp for one triangle (as RasterStage::draw() for triangles that are not small)
+/// into a region's z-buffer.
+void raster_64bit(const Vec2f s[3], const float z[3], int t, int rx0, int rx1, int ry0, int ry1,
+                  std::vector<unsigned long long>& key) {
+  TriangleRaster R;
+  raster_bounds(s, &R.x0, &R.x1, &R.y0, &R.y1);
+  if (!triangle_raster_setup(s, z, &R)) return;
+  for (int y = std::max(ry0, R.y0); y <= std::min(ry1, R.y1); ++y)
+    for (int x = std::max(rx0, R.x0); x <= std::min(rx1, R.x1); ++x) {
+      long long e[3];
+      raster_edges_at(R, x, y, e);
+      if (!raster_inside(R, e[0], e[1], e[2])) continue;
+      const float iz = raster_inverse_depth(R, e[0], e[1], e[2]);
+      if (!(iz > 0.f)) continue;
+      pipeline::key_min(&key[size_t((y - ry0) * (rx1 - rx0 + 1) + x - rx0)],
+                        (static_cast<unsigned long long>(pipeline::depth_key(iz)) << 32) | unsigned(t));
+    }
+}
+
+TEST(SimdRows, TheSmallTriangleRasterCoversAndDepthsAsThe64BitOne) {
+  // Random triangles of bounds up to kSmallTriangleCentres centres a side, half of them with vertices on the
+  // fixed-point grid near pixel centres (edges through centres: the fill rule decides), some degenerate.
+  std::mt19937 rng(19);
+  std::uniform_real_distribution<float> u(0.f, 1.f);
+  long centres = 0, covered = 0;
+  for (int rep = 0; rep < 20000; ++rep) {
+    const float cx = 100.f + 400.f * u(rng), cy = 50.f + 300.f * u(rng), size = 0.3f + 4.6f * u(rng);
+    Vec2f s[3];
+    for (Vec2f& v : s) {
+      v = Vec2f{cx + size * u(rng), cy + size * u(rng)};
+      if (rep % 2) v = Vec2f{std::round(v.x * 4.f) / 4.f, std::round(v.y * 2.f) / 2.f};
+    }
+    if (rep % 50 == 0) s[2] = s[1];
+    const float z[3] = {0.4f + u(rng), 0.4f + u(rng), 0.4f + u(rng)};
+    int x0, x1, y0, y1;
+    raster_bounds(s, &x0, &x1, &y0, &y1);
+    if (x1 - x0 >= kSmallTriangleCentres || y1 - y0 >= kSmallTriangleCentres) continue;
+    const float sx[3] = {s[0].x, s[1].x, s[2].x}, sy[3] = {s[0].y, s[1].y, s[2].y};
+    const SmallTriangleLanes<ScalarLanes> T = raster_small_setup_lanes<ScalarLanes>(sx, sy, z);
+    TriangleRaster R;
+    R.x0 = x0, R.x1 = x1, R.y0 = y0, R.y1 = y1;
+    const bool drawn = triangle_raster_setup(s, z, &R);
+    ASSERT_EQ(T.drawn, drawn);
+    if (!drawn) continue;
+    for (int y = y0; y <= y1; ++y)
+      for (int x = x0; x <= x1; ++x) {
+        long long e[3];
+        raster_edges_at(R, x, y, e);
+        float iz;
+        const bool in = raster_small_centre_lanes<ScalarLanes>(T, x, y, &iz);
+        ASSERT_EQ(in, raster_inside(R, e[0], e[1], e[2])) << "triangle " << rep << ", centre " << x << ", " << y;
+        if (in) ASSERT_TRUE(same_bits(iz, raster_inverse_depth(R, e[0], e[1], e[2])));
+        ++centres, covered += in;
+      }
+  }
+  EXPECT_GT(centres, 20000);
+  EXPECT_GT(covered, 5000);
+}
+
+TEST(SimdRows, ARasterBatchDrawsTheSmallTrianglesAndLeavesTheOthersThatMeetTheRegion) {
   std::mt19937 rng(17);
   std::uniform_real_distribution<float> u(0.f, 1.f);
-  long candidates = 0, looked_at = 0;
-  for (float focal : {600.f, 110.f}) {  // triangles of a few pixels, and mostly between pixel centres
+  long left = 0, looked_at = 0;
+  for (float focal : {900.f, 300.f, 110.f}) {  // triangles of several pixels, of about one, mostly between centres
     BlendScene sc(focal, rng);
     std::vector<float> area = sc.area;
     for (float& a : area) a = u(rng) < 0.2f ? 0.f : a;  // culled or clipped
@@ -346,31 +405,49 @@ TEST(SimdRows, RasterCandidatesAreTheTrianglesWhoseBoundsMeetTheRegion) {
       const int rx0 = sc.x0 - 5 + int(u(rng) * float(sc.w)), ry0 = sc.y0 - 5 + int(u(rng) * float(sc.h));
       const int rx1 = rx0 + int(u(rng) * float(sc.w)), ry1 = ry0 + int(u(rng) * float(sc.h));
       const int first = int(u(rng) * 40.f), end = rep % 4 == 0 ? sc.M.num_triangles : first + int(u(rng) * 300.f);
-      const RasterCandidates c{sc.M.triangles, pix.data(), area.data(), first, end, rx0, rx1, ry0, ry1};
+      const size_t pixels = size_t((rx1 - rx0 + 1) * (ry1 - ry0 + 1));
+      std::vector<unsigned long long> key(pixels, pipeline::kEmptyKey), want_key(pixels, pipeline::kEmptyKey);
+      const RasterBatch b{sc.M.triangles, pix.data(), sc.cam.data(), area.data(), first, end, rx0, rx1, ry0, ry1,
+                          key.data()};
       const size_t room = size_t(end - first);
       std::vector<int> t(room), x0(room), x1(room), y0(room), y1(room);
-      const int n = raster_candidates(c, t.data(), x0.data(), x1.data(), y0.data(), y1.data());
+      const int n = raster_batch(b, t.data(), x0.data(), x1.data(), y0.data(), y1.data());
       int k = 0;
-      for (int tri = first; tri < end; ++tri) {  // as RasterStage::operator() picks them
+      for (int tri = first; tri < end; ++tri) {  // as RasterStage::operator() picks and draws them
         if (area[size_t(tri)] == 0.f) continue;
         const int* v = sc.M.triangles + 3 * tri;
         const Vec2f s[3] = {pix[size_t(v[0])], pix[size_t(v[1])], pix[size_t(v[2])]};
-        int b[4];
-        raster_bounds(s, &b[0], &b[1], &b[2], &b[3]);
-        if (std::max(rx0, b[0]) > std::min(rx1, b[1]) || std::max(ry0, b[2]) > std::min(ry1, b[3])) continue;
-        ASSERT_LT(k, n) << "triangle " << tri << " is missing";
-        ASSERT_EQ(t[size_t(k)], tri);
-        ASSERT_TRUE(x0[size_t(k)] == b[0] && x1[size_t(k)] == b[1] && y0[size_t(k)] == b[2] && y1[size_t(k)] == b[3])
-            << "bounds of triangle " << tri;
-        ++k;
+        int bd[4];
+        raster_bounds(s, &bd[0], &bd[1], &bd[2], &bd[3]);
+        if (std::max(rx0, bd[0]) > std::min(rx1, bd[1]) || std::max(ry0, bd[2]) > std::min(ry1, bd[3])) continue;
+        const float z[3] = {sc.cam[size_t(v[0])].z, sc.cam[size_t(v[1])].z, sc.cam[size_t(v[2])].z};
+        raster_64bit(s, z, tri, rx0, rx1, ry0, ry1, want_key);
+        const bool small = bd[1] - bd[0] < kSmallTriangleCentres && bd[3] - bd[2] < kSmallTriangleCentres;
+        if (k < n && t[size_t(k)] == tri) {
+          // A small one is left only from the last partial vector (at most 64 lanes: 2048-bit vectors).
+          if (small) ASSERT_GE(tri, end - 64) << "small triangle " << tri << " left to the caller";
+          ASSERT_TRUE(x0[size_t(k)] == bd[0] && x1[size_t(k)] == bd[1] && y0[size_t(k)] == bd[2] && y1[size_t(k)] == bd[3])
+              << "bounds of triangle " << tri;
+          ++k;
+        } else {
+          ASSERT_TRUE(small) << "triangle " << tri << " is neither drawn nor left";
+        }
       }
-      ASSERT_EQ(n, k);
-      candidates += n;
+      ASSERT_EQ(n, k) << "left: triangles that do not meet the region";
+      // The caller draws what is left (64-bit here): then the z-buffer is the one of drawing each triangle.
+      for (int j = 0; j < n; ++j) {
+        const int* v = sc.M.triangles + 3 * t[size_t(j)];
+        const Vec2f s[3] = {pix[size_t(v[0])], pix[size_t(v[1])], pix[size_t(v[2])]};
+        const float z[3] = {sc.cam[size_t(v[0])].z, sc.cam[size_t(v[1])].z, sc.cam[size_t(v[2])].z};
+        raster_64bit(s, z, t[size_t(j)], rx0, rx1, ry0, ry1, key);
+      }
+      for (size_t q = 0; q < pixels; ++q) ASSERT_EQ(key[q], want_key[q]) << "pixel " << q;
+      left += n;
       looked_at += end - first;
     }
   }
-  EXPECT_GT(candidates, 1000);
-  EXPECT_LT(candidates, looked_at / 2);
+  EXPECT_GT(left, 100);
+  EXPECT_LT(left, looked_at / 3);
 }
 
 }  // namespace

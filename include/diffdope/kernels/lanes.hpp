@@ -39,10 +39,13 @@ struct ScalarLanes {
   DD_HOST_DEVICE static I seti(int x) { return x; }
   DD_HOST_DEVICE static M lti(I a, I b) { return a < b; }
   DD_HOST_DEVICE static M eqi(I a, I b) { return a == b; }
+  DD_HOST_DEVICE static I ori(I a, I b) { return a | b; }
   DD_HOST_DEVICE static I selecti(M m, I a, I b) { return m ? a : b; }
   DD_HOST_DEVICE static V to_float(I a) { return float(a); }
   /// Rounds toward zero; the caller keeps a within the int range.
   DD_HOST_DEVICE static I truncate(V a) { return static_cast<int>(a); }
+  /// Rounds to nearest, ties to even (the default rounding mode); the caller keeps a within the int range.
+  DD_HOST_DEVICE static I round(V a) { return static_cast<int>(lrintf(a)); }
 
   DD_HOST_DEVICE static V gather(const float* base, I i) { return base[i]; }
   DD_HOST_DEVICE static I gather(const int* base, I i) { return base[i]; }
