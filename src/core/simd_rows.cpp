@@ -161,17 +161,17 @@ int ShadeRowImpl(const ShadeRow& r) {
   const V ray_y = hn::Set(d, (r.y - r.K.cy) / r.K.fy);  // pixel_ray()'s, the same for the whole row
   HWY_ALIGN int tri[kMax];
   HWY_ALIGN float b[3][kMax], s[kMax], depth[kMax], c[3][kMax], du[3][kMax], dv[3][kMax];
-  int x = 0;
-  for (; x + N <= r.n; x += N) {
+  for (int x = 0; x < r.n; x += N) {
+    const int lanes = std::min(N, r.n - x);  // the last vector's lanes past the row: empty, not kept
     bool any = false;
     for (int j = 0; j < N; ++j) {
-      tri[j] = pipeline::key_triangle(r.key[x + j]);
-      r.tri[x + j] = tri[j];
+      tri[j] = j < lanes ? pipeline::key_triangle(r.key[x + j]) : -1;
+      if (j < lanes) r.tri[x + j] = tri[j];
       any |= tri[j] >= 0;
     }
     if (!any) {
-      std::fill(r.pre + x, r.pre + x + N, empty);
-      std::fill(r.post + x, r.post + x + N, empty);
+      std::fill(r.pre + x, r.pre + x + lanes, empty);
+      std::fill(r.post + x, r.post + x + lanes, empty);
       continue;
     }
     const I t_raw = hn::Load(di, tri);
@@ -201,7 +201,7 @@ int ShadeRowImpl(const ShadeRow& r) {
       hn::Store(duv[k], d, du[k]);
       hn::Store(dvv[k], d, dv[k]);
     }
-    for (int j = 0; j < N; ++j) {
+    for (int j = 0; j < lanes; ++j) {
       if (tri[j] < 0) {
         r.pre[x + j] = r.post[x + j] = empty;
         continue;
@@ -216,7 +216,7 @@ int ShadeRowImpl(const ShadeRow& r) {
       sb.dcdv = Vec3f{dv[0][j], dv[1][j], dv[2][j]};
     }
   }
-  return x;
+  return r.n;
 }
 
 /// Steps of a silhouette walk taken on vectors. Most walks end within one or two triangles, but a vector waits

@@ -37,7 +37,7 @@ struct ShadeRow {
   int n;
 };
 
-/// The shade stage on the row's whole vectors; returns how many pixels it did.
+/// The shade stage on the whole row (the last vector partly filled); returns n.
 int shade_row(const ShadeRow& row);
 
 /// A row of the blend detection: each pixel's pair with its right neighbour (slot 2 q) and with the pixel below
