@@ -325,8 +325,10 @@ struct RasterStage {
       const RasterBatch rb{o.M.triangles, p.pix + hy.vertex_offset, p.cam + hy.vertex_offset,
                            p.area + hy.triangle_offset, c, imin(c + kChunk, imin(end, o.nt)), hy.x0,
                            hy.x0 + hy.w - 1, hy.y0, hy.y0 + hy.h - 1, p.key + hy.offset};
-      const int n = raster_batch(rb, t, x0, x1, y0, y1);
+      int rest;
+      const int n = raster_batch(rb, t, x0, x1, y0, y1, &rest);
       for (int k = 0; k < n; ++k) draw(t[k], 0, x0[k], x1[k], y0[k], y1[k], h);
+      for (int i = rest; i < rb.end; ++i) (*this)(i, h);
     }
   }
 #endif

@@ -302,7 +302,8 @@ int BlendRowImpl(const BlendRow& r) {
   return r.n;
 }
 
-int RasterBatchImpl(const RasterBatch& c, int* out_t, int* out_x0, int* out_x1, int* out_y0, int* out_y1) {
+int RasterBatchImpl(const RasterBatch& c, int* out_t, int* out_x0, int* out_x1, int* out_y0, int* out_y1,
+                    int* rest) {
   const DF d;
   const DI di;
   using V = HwyLanes::V;
@@ -369,16 +370,7 @@ int RasterBatchImpl(const RasterBatch& c, int* out_t, int* out_x0, int* out_x1, 
                                   unsigned(t + j));
       }
   }
-  for (; t < c.end; ++t) {  // the last partial vector: left to the caller
-    if (c.area[t] == 0.f) continue;
-    const int* v = c.triangles + 3 * t;
-    const Vec2f s[3] = {c.pix[v[0]], c.pix[v[1]], c.pix[v[2]]};
-    int x0, x1, y0, y1;
-    raster_bounds(s, &x0, &x1, &y0, &y1);
-    if (std::max(c.rx0, x0) > std::min(c.rx1, x1) || std::max(c.ry0, y0) > std::min(c.ry1, y1)) continue;
-    out_t[n] = t, out_x0[n] = x0, out_x1[n] = x1, out_y0[n] = y0, out_y1[n] = y1;
-    ++n;
-  }
+  *rest = t;  // the last partial vector's: the caller's
   return n;
 }
 
@@ -399,8 +391,8 @@ HWY_EXPORT(TargetName);
 int loss_row(const LossRow& row, double sum[3]) { return HWY_DYNAMIC_DISPATCH(LossRowImpl)(row, sum); }
 int shade_row(const ShadeRow& row) { return HWY_DYNAMIC_DISPATCH(ShadeRowImpl)(row); }
 int blend_row(const BlendRow& row) { return HWY_DYNAMIC_DISPATCH(BlendRowImpl)(row); }
-int raster_batch(const RasterBatch& b, int* t, int* x0, int* x1, int* y0, int* y1) {
-  return HWY_DYNAMIC_DISPATCH(RasterBatchImpl)(b, t, x0, x1, y0, y1);
+int raster_batch(const RasterBatch& b, int* t, int* x0, int* x1, int* y0, int* y1, int* rest) {
+  return HWY_DYNAMIC_DISPATCH(RasterBatchImpl)(b, t, x0, x1, y0, y1, rest);
 }
 const char* simd_row_target() { return HWY_DYNAMIC_DISPATCH(TargetName)(); }
 }  // namespace diffdope

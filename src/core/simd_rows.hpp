@@ -78,9 +78,10 @@ struct RasterBatch {
   unsigned long long* key;  // the region's z-buffer, row by row (rx1 - rx0 + 1 per row)
 };
 
-/// Draws the small triangles and writes the others that meet the region, in order, into t and their bounds
-/// into x0 .. y1 (room for end - first each); returns how many it left.
-int raster_batch(const RasterBatch& b, int* t, int* x0, int* x1, int* y0, int* y1);
+/// Looks at the triangles first .. *rest - 1 (whole vectors; *rest: the first of the last partial vector, left to
+/// the caller whole): draws the small ones and writes the others that meet the region, in order, into t and
+/// their bounds into x0 .. y1 (room for end - first each); returns how many it left.
+int raster_batch(const RasterBatch& b, int* t, int* x0, int* x1, int* y0, int* y1, int* rest);
 
 /// The instruction set the rows run on here (e.g. "AVX3", "AVX2", "SSE4"; for the profile and the README).
 const char* simd_row_target();

@@ -5,6 +5,7 @@
 // the 32-bit raster of small triangles against the 64-bit raster (the z-buffer, which triangles are left).
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstring>
 #include <limits>
@@ -411,9 +412,11 @@ TEST(SimdRows, ARasterBatchDrawsTheSmallTrianglesAndLeavesTheOthersThatMeetTheRe
                           key.data()};
       const size_t room = size_t(end - first);
       std::vector<int> t(room), x0(room), x1(room), y0(room), y1(room);
-      const int n = raster_batch(b, t.data(), x0.data(), x1.data(), y0.data(), y1.data());
+      int rest = -1;
+      const int n = raster_batch(b, t.data(), x0.data(), x1.data(), y0.data(), y1.data(), &rest);
+      ASSERT_TRUE(rest >= first && rest <= end && end - rest < 64) << "at most one partial vector is left whole";
       int k = 0;
-      for (int tri = first; tri < end; ++tri) {  // as RasterStage::operator() picks and draws them
+      for (int tri = first; tri < rest; ++tri) {  // as RasterStage::operator() picks and draws them
         if (area[size_t(tri)] == 0.f) continue;
         const int* v = sc.M.triangles + 3 * tri;
         const Vec2f s[3] = {pix[size_t(v[0])], pix[size_t(v[1])], pix[size_t(v[2])]};
@@ -424,8 +427,7 @@ TEST(SimdRows, ARasterBatchDrawsTheSmallTrianglesAndLeavesTheOthersThatMeetTheRe
         raster_64bit(s, z, tri, rx0, rx1, ry0, ry1, want_key);
         const bool small = bd[1] - bd[0] < kSmallTriangleCentres && bd[3] - bd[2] < kSmallTriangleCentres;
         if (k < n && t[size_t(k)] == tri) {
-          // A small one is left only from the last partial vector (at most 64 lanes: 2048-bit vectors).
-          if (small) ASSERT_GE(tri, end - 64) << "small triangle " << tri << " left to the caller";
+          ASSERT_FALSE(small) << "small triangle " << tri << " left to the caller";
           ASSERT_TRUE(x0[size_t(k)] == bd[0] && x1[size_t(k)] == bd[1] && y0[size_t(k)] == bd[2] && y1[size_t(k)] == bd[3])
               << "bounds of triangle " << tri;
           ++k;
@@ -434,13 +436,20 @@ TEST(SimdRows, ARasterBatchDrawsTheSmallTrianglesAndLeavesTheOthersThatMeetTheRe
         }
       }
       ASSERT_EQ(n, k) << "left: triangles that do not meet the region";
-      // The caller draws what is left (64-bit here): then the z-buffer is the one of drawing each triangle.
-      for (int j = 0; j < n; ++j) {
-        const int* v = sc.M.triangles + 3 * t[size_t(j)];
-        const Vec2f s[3] = {pix[size_t(v[0])], pix[size_t(v[1])], pix[size_t(v[2])]};
-        const float z[3] = {sc.cam[size_t(v[0])].z, sc.cam[size_t(v[1])].z, sc.cam[size_t(v[2])].z};
-        raster_64bit(s, z, t[size_t(j)], rx0, rx1, ry0, ry1, key);
-      }
+      // The caller draws the triangles left and those not looked at (64-bit here); then the z-buffer is the one of
+      // drawing every triangle.
+      std::vector<int> caller(t.begin(), t.begin() + n);
+      for (int tri = rest; tri < end; ++tri) caller.push_back(tri);
+      for (int tri = first; tri < end; ++tri)
+        for (int pass = 0; pass < 2; ++pass) {
+          if (area[size_t(tri)] == 0.f || (pass == 0 && tri < rest) ||
+              (pass == 1 && std::find(caller.begin(), caller.end(), tri) == caller.end()))
+            continue;
+          const int* v = sc.M.triangles + 3 * tri;
+          const Vec2f s[3] = {pix[size_t(v[0])], pix[size_t(v[1])], pix[size_t(v[2])]};
+          const float z[3] = {sc.cam[size_t(v[0])].z, sc.cam[size_t(v[1])].z, sc.cam[size_t(v[2])].z};
+          raster_64bit(s, z, tri, rx0, rx1, ry0, ry1, pass == 0 ? want_key : key);
+        }
       for (size_t q = 0; q < pixels; ++q) ASSERT_EQ(key[q], want_key[q]) << "pixel " << q;
       left += n;
       looked_at += end - first;
