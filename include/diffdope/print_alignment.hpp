@@ -44,8 +44,11 @@ struct PrintAlignment {
 using PrintEvaluator = std::function<void(const std::vector<Pose>& poses, std::vector<LossValue>& out)>;
 
 /// Turns `pose` about `axis` (model frame: ShapeRotation::axis through pivot; angle ignored) by up to +-range
-/// radians: of the turns that meet the conditions above, the one where the texture term is lowest (none: no
-/// turn). `texture_weight`: the refiner's own weight of the texture term (its loss = evaluated total -
+/// radians: of the turns that meet the conditions above, the one with the lowest sum of the texture term and the
+/// refiner's loss, each relative to its value at `pose` (none: no turn). Where the print barely registers (a pose
+/// not yet converged: measured on dev_bop's hard starts with config/fast.yaml) the texture term is nearly flat
+/// over the turns and its lowest value is noise; the loss, whose colour term sees the print a little, then
+/// decides. `texture_weight`: the refiner's own weight of the texture term (its loss = evaluated total -
 /// (1 - texture_weight) * texture).
 PrintAlignment align_print(const Pose& pose, const ShapeRotation& axis, double range, double texture_weight,
                            const PrintEvaluator& evaluate);

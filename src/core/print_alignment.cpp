@@ -48,10 +48,16 @@ PrintAlignment align_print(const Pose& pose, const ShapeRotation& axis, double r
   const LossValue at = values[size_t(n)];
   out.print_before = out.print_after = at.texture;
   out.loss_before = out.loss_after = refiner_loss(at, texture_weight);
-  // The best print among the turns that may be kept (none: the result itself, index n).
+  // The best turn among those that may be kept (none: the result itself, index n): the lowest sum of the texture
+  // term and the loss, each relative to its value at the result (acceptable() keeps at.texture above 0; a loss
+  // of 0 there allows no other).
+  const double f_at = refiner_loss(at, texture_weight);
+  const auto score = [&](const LossValue& v) {
+    return v.texture / at.texture + (f_at > 0 ? refiner_loss(v, texture_weight) / f_at : 1.0);
+  };
   const auto best_of = [&](size_t first, size_t best) {
     for (size_t j = first; j < values.size(); ++j)
-      if (acceptable(at, values[j], texture_weight) && (best == size_t(n) || values[j].texture < values[best].texture))
+      if (acceptable(at, values[j], texture_weight) && (best == size_t(n) || score(values[j]) < score(values[best])))
         best = j;
     return best;
   };

@@ -195,6 +195,21 @@ TEST(PrintAlignment, TakesTheTextureMinimumWithinRangeUnlessTheLossRises) {
   EXPECT_NEAR(align_print(pose, axis, 0.7, 0.0, eval).angle, target, kPrintFineStep);  // gains 7 %
   depth = 0.25;
   EXPECT_EQ(align_print(pose, axis, 0.7, 0.0, eval).angle, 0.0);
+  // A nearly flat print term (a pose where the print barely registers): of two acceptable dips, the one where the
+  // loss falls, not the slightly deeper one where it rises (within kPrintLossTolerance).
+  {
+    const double a1 = -0.3, a2 = 0.25;
+    const PrintEvaluator flat = [&](const std::vector<Pose>& poses, std::vector<LossValue>& out) {
+      out.assign(poses.size(), LossValue());
+      for (size_t i = 0; i < poses.size(); ++i) {
+        const double a = turn_of(poses[i]);
+        const double d1 = std::exp(-std::pow((a - a1) / 0.03, 2)), d2 = std::exp(-std::pow((a - a2) / 0.03, 2));
+        out[i].texture = 0.7 * (1.0 - 0.03 * d1 - 0.025 * d2);
+        out[i].total = 1.0 + 0.01 * d1 - 0.02 * d2 + out[i].texture;
+      }
+    };
+    EXPECT_NEAR(align_print(pose, axis, 0.7, 0.0, flat).angle, a2, kPrintFineStep);
+  }
   // No range: nothing evaluated.
   calls = 0;
   EXPECT_EQ(align_print(pose, axis, 0.0, 0.0, eval).angle, 0.0);
