@@ -46,12 +46,12 @@ PrintAlignment align_print(const Pose& pose, const ShapeRotation& axis, double r
   for (double a : angles) poses.push_back(turned(a));
   evaluate(poses, values);
   const LossValue at = values[size_t(n)];
+  const double f_at = refiner_loss(at, texture_weight);
   out.print_before = out.print_after = at.texture;
-  out.loss_before = out.loss_after = refiner_loss(at, texture_weight);
+  out.loss_before = out.loss_after = f_at;
   // The best turn among those that may be kept (none: the result itself, index n): the lowest sum of the texture
   // term and the loss, each relative to its value at the result (acceptable() keeps at.texture above 0; a loss
   // of 0 there allows no other).
-  const double f_at = refiner_loss(at, texture_weight);
   const auto score = [&](const LossValue& v) {
     return v.texture / at.texture + (f_at > 0 ? refiner_loss(v, texture_weight) / f_at : 1.0);
   };

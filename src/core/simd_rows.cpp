@@ -105,6 +105,7 @@ struct HwyLanes {
 };
 
 // The kernels built for this target (their definitions must lie inside the target's region).
+#include "diffdope/kernels/lane_math.inc"
 #include "diffdope/kernels/pixel_loss_lanes.inc"
 #include "diffdope/kernels/raster_lanes.inc"
 #include "diffdope/kernels/texture_lanes.inc"
@@ -158,7 +159,7 @@ int ShadeRowImpl(const ShadeRow& r) {
   constexpr size_t kMax = HwyLanes::kMaxLanes;
   const int N = int(hn::Lanes(d));
   const PixelAttr empty{0.f, {0.f, 0.f, 0.f}, 0.f};
-  const V ray_y = hn::Set(d, (r.y - r.K.cy) / r.K.fy);  // pixel_ray()'s, the same for the whole row
+  const V ray_y = hn::Set(d, pixel_ray(r.K, 0.f, r.y).y);  // the same for the whole row
   HWY_ALIGN int tri[kMax];
   HWY_ALIGN float b[3][kMax], s[kMax], depth[kMax], c[3][kMax], du[3][kMax], dv[3][kMax];
   for (int x = 0; x < r.n; x += N) {
@@ -177,8 +178,8 @@ int ShadeRowImpl(const ShadeRow& r) {
     const I t_raw = hn::Load(di, tri);
     const I t = hn::IfThenElse(hn::Lt(t_raw, hn::Zero(di)), hn::Zero(di), t_raw);  // empty lanes: triangle 0, not kept
     const I three = hn::Set(di, 3), one = hn::Set(di, 1), two = hn::Set(di, 2);
-    const I corner[3] = {HwyLanes::gather(r.M.triangles, three * t), HwyLanes::gather(r.M.triangles, three * t + one),
-                         HwyLanes::gather(r.M.triangles, three * t + two)};
+    I corner[3];
+    HWY_NAMESPACE::triangle_corners_lanes<HwyLanes>(r.M.triangles, t, corner);
     const float* cam = &r.G.cam[0].x;
     V X[3][3];
     for (int k = 0; k < 3; ++k) {
@@ -323,8 +324,8 @@ int RasterBatchImpl(const RasterBatch& c, int* out_t, int* out_x0, int* out_x1, 
     const auto drawn = hn::RebindMask(di, hn::Ne(hn::LoadU(d, c.area + t), hn::Zero(d)));
     if (hn::AllFalse(di, drawn)) continue;
     const I tri = hn::Add(hn::Set(di, t), hn::Iota(di, 0));
-    const I v[3] = {HwyLanes::gather(c.triangles, three * tri), HwyLanes::gather(c.triangles, three * tri + one),
-                    HwyLanes::gather(c.triangles, three * tri + two)};
+    I v[3];
+    HWY_NAMESPACE::triangle_corners_lanes<HwyLanes>(c.triangles, tri, v);
     V sx[3], sy[3];
     for (int k = 0; k < 3; ++k) sx[k] = HwyLanes::gather(pix, two * v[k]), sy[k] = HwyLanes::gather(pix, two * v[k] + one);
     I x0, x1, y0, y1;

@@ -62,4 +62,7 @@ struct ScalarLanes {
   }
 };
 
+/// Helpers every lane type shares (clamp_lanes, floor_lanes, ceil_lanes).
+#include "diffdope/kernels/lane_math.inc"
+
 }  // namespace diffdope

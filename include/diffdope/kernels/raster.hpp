@@ -5,8 +5,22 @@
 
 namespace diffdope {
 
-/// Edge function of directed edge a->b at point p: (b - a) x (p - a). Linear in p; zero on the edge line.
-DD_HOST_DEVICE float edge_function(Vec2f a, Vec2f b, Vec2f p) { return cross2(b - a, p - a); }
+/// Watertight coverage: vertex positions snapped to 1/256 pixel and edge functions evaluated exactly in 64-bit
+/// integers, so two triangles sharing an edge decide a pixel centre on it the same way (float edge functions
+/// of a->b and b->a may both round below zero and leave a hole along a diagonal).
+constexpr int kSubpixelBits = 8;
+/// Pixel coordinates are clamped to +-1e6 before they become fixed-point (products of coordinates stay far
+/// inside 64 bits; the values inside 32 bits) and to +-2^30 before they become pixel indices.
+constexpr float kMaxFixedCoordinate = 1e6f;
+constexpr float kMaxCoordinate = 1073741824.f;
+
+#include "diffdope/kernels/raster_lanes.inc"
+
+/// Edge function of directed edge a->b at point p: (b - a) x (p - a) (edge_function_lanes()). Linear in p; zero
+/// on the edge line.
+DD_HOST_DEVICE float edge_function(Vec2f a, Vec2f b, Vec2f p) {
+  return edge_function_lanes<ScalarLanes>(a.x, a.y, b.x, b.y, p.x, p.y);
+}
 
 /// Gradients of edge_function w.r.t. a and b (p held fixed).
 DD_HOST_DEVICE void edge_function_grad(Vec2f a, Vec2f b, Vec2f p, Vec2f* d_a, Vec2f* d_b) {
@@ -14,20 +28,12 @@ DD_HOST_DEVICE void edge_function_grad(Vec2f a, Vec2f b, Vec2f p, Vec2f* d_a, Ve
   *d_b = {p.y - a.y, a.x - p.x};
 }
 
-/// Watertight coverage: vertex positions snapped to 1/256 pixel and edge functions evaluated exactly in 64-bit
-/// integers, so two triangles sharing an edge decide a pixel centre on it the same way (float edge functions
-/// of a->b and b->a may both round below zero and leave a hole along a diagonal).
-constexpr int kSubpixelBits = 8;
 struct FixedPoint2 {
   long long x, y;
 };
 
-DD_HOST_DEVICE FixedPoint2 to_fixed(Vec2f p) {
-  const float lim = 1e6f;  // keeps products of coordinates far inside 64 bits
-  const float x = p.x < -lim ? -lim : (p.x > lim ? lim : p.x), y = p.y < -lim ? -lim : (p.y > lim ? lim : p.y);
-  return {static_cast<long long>(llrintf(x * float(1 << kSubpixelBits))),
-          static_cast<long long>(llrintf(y * float(1 << kSubpixelBits)))};
-}
+/// to_fixed_lanes() of a point.
+DD_HOST_DEVICE FixedPoint2 to_fixed(Vec2f p) { return {to_fixed_lanes<ScalarLanes>(p.x), to_fixed_lanes<ScalarLanes>(p.y)}; }
 
 DD_HOST_DEVICE long long edge_function_fixed(FixedPoint2 a, FixedPoint2 b, long long px, long long py) {
   return (b.x - a.x) * (py - a.y) - (b.y - a.y) * (px - a.x);
@@ -53,11 +59,6 @@ struct TriangleRaster {
   float iz[3];          // 1/z of the vertex edge k weighs (edge k weighs vertex k+2): depth is linear in 1/z
   int x0, x1, y0, y1;   // pixel bounding box (inclusive, not clipped to the image)
 };
-
-/// Pixel coordinates are clamped to +-2^30 before they become ints (raster_lanes.inc).
-constexpr float kMaxCoordinate = 1073741824.f;
-
-#include "diffdope/kernels/raster_lanes.inc"
 
 /// raster_bounds_lanes() of one triangle (s: its pixel positions).
 DD_HOST_DEVICE void raster_bounds(const Vec2f s[3], int* x0, int* x1, int* y0, int* y1) {
@@ -126,7 +127,8 @@ DD_HOST_DEVICE float raster_inverse_depth(const TriangleRaster& r, long long e0,
   return (float(e0) * r.iz[0] + float(e1) * r.iz[1] + float(e2) * r.iz[2]) * r.inv2a;
 }
 
-/// Backward of ray_barycentrics_lanes (shade_lanes.inc): given dL/db (g_b) and the forward's b and s, adds dL/dX_i into g_X[i].
+/// Backward of ray_barycentrics_lanes (shade_lanes.inc): given dL/db (g_b) and the forward's b and s, adds dL/dX_i
+/// into g_X[i].
 DD_HOST_DEVICE void ray_barycentrics_backward(Vec3f d, const Vec3f X[3], const float b[3], float s,
                                               const float g_b[3], Vec3f g_X[3]) {
   if (s == 0.f) return;
