@@ -130,7 +130,10 @@ struct RefineResult {
   Pose initial_pose;                  // the initial pose the winning run started from
   LossValue loss;                     // winner's final loss, per term (unweighted means) and total
   double initial_loss = 0;            // loss of the initial pose (at image_scale)
-  std::vector<double> run_losses;     // best loss of every run (at image_scale; +inf for runs dropped in the coarse phase)
+  /// Best loss of every run (at image_scale; +inf for runs dropped in the coarse phase): the batch_size runs from
+  /// the starts, then the shape scan's candidates (scan_turns). The winner has the lowest loss among the first
+  /// unless a candidate was taken (scan_taken).
+  std::vector<double> run_losses;
   std::vector<double> learning_rates; // every run's drawn rate
   std::vector<Pose> run_poses;        // every run's best pose (its start for runs dropped in the coarse phase)
   std::vector<double> history;        // winner's loss at every iteration (the coarse phase's at its own scale)
@@ -138,7 +141,9 @@ struct RefineResult {
   int winner = -1;                    // the run whose best pose is the result (its start's run when no run's
                                       // fine-phase best beat the start itself)
   int start = 0;                      // index of the initial pose the winning run started from
-  int scan_turns = 0;                 // runs the shape scan (explore_tolerance) turned to another rotation
+  int scan_turns = 0;                 // candidates the shape scan (explore_tolerance) added: runs from turned poses
+  bool scan_taken = false;            // the result is such a candidate, not the start's own basin (its print
+                                      // registered clearly better: see RefinerOptions::explore_tolerance)
   double print_turn = 0;              // radians the print alignment (print_search) turned the result by (0: none);
                                       // `loss` is then at the turned pose, up to kPrintLossTolerance (2 %)
                                       // above the winning run's best (and so, rarely, above initial_loss)

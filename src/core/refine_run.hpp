@@ -10,6 +10,32 @@
 
 namespace diffdope {
 
+/// What tells two converged poses apart: the refiner's loss and PrintRegistration::significance() (NaN: not
+/// measured: no rgb, a plain model, a continuous declared symmetry).
+struct JumpEvidence {
+  double loss = 0, print = 0;
+};
+/// A print registration this many standard deviations of its chance level below another's contradicts a move
+/// from that pose to this one, whatever the loss says (a flipped label that the flat colour term barely sees).
+constexpr double kPrintContradiction = 1.0;
+/// The relative loss gain a shape-scan candidate needs without clear print evidence, for a small turn; it grows
+/// with the turn's angle (jump_margin): the detector's pose is a prior, not noise.
+constexpr double kJumpMargin = 0.01;
+/// kJumpMargin * (1 + 4 * angle / pi): 1.7 % for a 30-degree turn, 3 % for a quarter turn, 5 % for a half turn.
+double jump_margin(double angle);
+/// Whether the evidence supports a jump from the start's basin (`from`) to a shape-scan candidate (`to`),
+/// turned `angle` radians from the run it came from, both converged. Never without a lower loss. With the
+/// print measured at both (and min_significance > 0): never when it contradicts the jump (kPrintContradiction);
+/// always when it registers at the candidate, and by that much more than at the basin, at least
+/// min_significance * (1 + angle / pi) standard deviations. Otherwise the loss decides, lower by more than
+/// jump_margin(angle).
+bool jump_is_supported(const JumpEvidence& from, const JumpEvidence& to, double angle, double min_significance);
+/// Whether the print's registration allows the print alignment's turn from a pose whose print significance is
+/// z_from to one whose is z_to: not lower by more than kPrintContradiction (the alignment's texture term found
+/// the turn; a registration that falls says the turn moved the print away). Always with min_significance 0 or
+/// z_from not measured.
+bool turn_is_supported(double z_from, double z_to, double min_significance);
+
 class RefineRun {
  public:
   /// Validates the input and prepares the scaled images, the loss and the learning rates. Throws
@@ -49,6 +75,11 @@ class RefineRun {
                 std::vector<LossValue>& out, bool fine = false);
   /// Winner and quality scores (renders the refined pose once per view).
   RefineResult finish(Renderer& renderer);
+  /// How the print of a render registers with the image (one view with rgb; else not measured).
+  PrintRegistration register_render(const RenderImage& img) const;
+  /// PrintRegistration::significance() at `pose` (one render at the fine scale); NaN when not measurable (no
+  /// rgb, several views, a plain model, a continuous declared symmetry).
+  double print_significance(Renderer& renderer, const Pose& pose) const;
 
   /// The camera and images of view `v` at this iteration (coarse, then fine).
   const Camera& camera(size_t v = 0) const { return coarse() ? coarse_[v].cam : fine_[v].cam; }
@@ -79,6 +110,10 @@ class RefineRun {
   std::vector<Pose> poses_, best_pose_, batch_;
   std::vector<LossValue> best_;
   std::vector<int> active_;  // runs still descending (successive halving drops the worst)
+  // Per run: the run a shape-scan candidate was turned from (-1: a run from the starts, indices < batch_size)
+  // and the angle of its turn (radians).
+  std::vector<int> source_;
+  std::vector<double> jump_angle_;
   int k_ = 0, stale_ = 0;
   int steps_ = 0;  // iterations stepped (k_ jumps when the coarse phase stalls)
   int halvings_ = 0;  // successive halvings done (of three)

@@ -421,6 +421,8 @@ RefineRun::RefineRun(const RefinerOptions& o, const std::vector<RefineView>& vie
   for (const Mesh* m : meshes_) diameter_ = std::max(diameter_, m->diameter());
   active_.resize(B);
   for (int i = 0; i < B; ++i) active_[i] = i;
+  source_.assign(B, -1);
+  jump_angle_.assign(B, 0.0);
   best_overall_ = std::numeric_limits<double>::infinity();
 }
 
@@ -429,9 +431,18 @@ const std::vector<Pose>& RefineRun::batch() {
   const bool last = k_ == iters;
   const int due = halvings_due(k_, iters);
   for (; options_.successive_halving && !last && halvings_ < due; ++halvings_) {
-    if (active_.size() <= 1) continue;
-    std::stable_sort(active_.begin(), active_.end(), [&](int a, int b) { return best_[a].total < best_[b].total; });
-    active_.resize((active_.size() + 1) / 2);
+    // The runs from the starts and the shape scan's candidates are halved apart: a candidate never displaces
+    // the start's own basin before both have converged.
+    std::vector<int> kept;
+    for (const bool candidates : {false, true}) {
+      std::vector<int> group;
+      for (int i : active_)
+        if ((source_[size_t(i)] >= 0) == candidates) group.push_back(i);
+      std::stable_sort(group.begin(), group.end(), [&](int a, int b) { return best_[a].total < best_[b].total; });
+      group.resize((group.size() + 1) / 2);
+      kept.insert(kept.end(), group.begin(), group.end());
+    }
+    active_ = kept;
     std::sort(active_.begin(), active_.end());
   }
   if (k_ == switch_at_ && switch_at_ > 0) {
@@ -460,16 +471,30 @@ void RefineRun::absorb(const std::vector<LossValue>& values, const std::function
   const RefinerOptions& o = options_;
   const int iters = o.iterations, starts = int(initials_.size());
   const bool last = k_ == iters;
-  if (scanning_) {  // each run goes on from its best turned pose; no step
+  if (scanning_) {  // candidates: a new run from each turn some run prefers; the runs go on unturned; no step
     const size_t n = 1 + turns_.size();
+    std::vector<size_t> from(n, SIZE_MAX);  // per turn, the batch row of the run it is lowest for
     for (size_t j = 0; j < active_.size(); ++j) {
       size_t best = 0;
       for (size_t t = 1; t < n; ++t)
         if (values[j * n + t].total < values[j * n + best].total) best = t;
-      // A turn must be clearly better: on a print the loss barely sees, near ties would pick one at random
-      // and flip starts that were right (measured on dev_bop's easy starts).
+      // A turn must be clearly better: on a print the loss barely sees, near ties would pick one at random.
       if (best == 0 || !(values[j * n + best].total < (1.0 - kScanMargin) * values[j * n].total)) continue;
-      poses_[active_[j]] = batch_[j * n + best];
+      if (from[best] == SIZE_MAX || values[j * n + best].total < values[from[best] * n + best].total) from[best] = j;
+    }
+    for (size_t t = 1; t < n; ++t) {
+      if (from[t] == SIZE_MAX) continue;
+      const int source = active_[from[t]];
+      const int i = int(poses_.size());
+      poses_.push_back(batch_[from[t] * n + t]);
+      best_pose_.push_back(poses_.back());
+      best_.push_back(LossValue());
+      best_.back().total = std::numeric_limits<double>::infinity();
+      res_.learning_rates.push_back(res_.learning_rates[size_t(source)]);
+      res_.run_histories.emplace_back();
+      source_.push_back(source);
+      jump_angle_.push_back(Eigen::AngleAxisd(turns_[t - 1].R).angle());
+      active_.push_back(i);
       ++res_.scan_turns;
     }
     scanning_ = false;
@@ -515,19 +540,63 @@ void RefineRun::absorb(const std::vector<LossValue>& values, const std::function
   ++steps_;
 }
 
+PrintRegistration RefineRun::register_render(const RenderImage& img) const {
+  const Observation& obs = fine_[0].obs;
+  if (meshes_.size() != 1 || !obs.has_rgb()) return PrintRegistration();
+  // The object's interior where the observation shows it: 2 px inside the render's full coverage (the
+  // silhouette's gradients fit whenever the shape does) and, with a mask, inside the observed mask.
+  cv::Mat interior = img.coverage >= 0.999f;
+  if (has_mask_) interior &= cv::Mat(obs.mask >= 0.5f);
+  cv::erode(interior, interior, cv::getStructuringElement(cv::MORPH_RECT, cv::Size(5, 5)));
+  return register_print(obs.rgb, img.color, interior, 8, loss_.texture_epsilon);
+}
+
+double RefineRun::print_significance(Renderer& renderer, const Pose& pose) const {
+  // A continuous declared symmetry turns the print with the object: it cannot be registered along that axis.
+  if (meshes_.size() != 1 || !fine_[0].obs.has_rgb() || !meshes_[0]->symmetry.continuous.empty())
+    return std::numeric_limits<double>::quiet_NaN();
+  return register_render(renderer.render(fine_[0].cam, *meshes_[0], {pose}, fine_[0].obs.mask)[0]).significance();
+}
+
+double jump_margin(double angle) { return kJumpMargin * (1.0 + 4.0 * std::abs(angle) / M_PI); }
+
+bool jump_is_supported(const JumpEvidence& from, const JumpEvidence& to, double angle, double min_significance) {
+  if (!(to.loss < from.loss)) return false;
+  const bool weighed = min_significance > 0 && std::isfinite(from.print) && std::isfinite(to.print);
+  if (weighed && to.print < from.print - kPrintContradiction) return false;
+  const double need = min_significance * (1.0 + std::abs(angle) / M_PI);
+  if (weighed && to.print >= need && to.print - std::max(from.print, 0.0) >= need) return true;
+  return to.loss < (1.0 - jump_margin(angle)) * from.loss;
+}
+
+bool turn_is_supported(double z_from, double z_to, double min_significance) {
+  if (!(min_significance > 0) || !std::isfinite(z_from)) return true;
+  return std::isfinite(z_to) && z_to >= z_from - kPrintContradiction;
+}
+
 RefineResult RefineRun::finish(Renderer& renderer) {
   const RefinerOptions& o = options_;
-  const int B = o.batch_size, starts = int(initials_.size());
+  const int B = o.batch_size, starts = int(initials_.size()), runs = int(best_.size());
   RefineResult res = std::move(res_);
-  res.run_losses.resize(B);
-  for (int i = 0; i < B; ++i) res.run_losses[i] = best_[i].total;
+  res.run_losses.resize(size_t(runs));
+  for (int i = 0; i < runs; ++i) res.run_losses[size_t(i)] = best_[size_t(i)].total;
   res.run_poses = best_pose_;
-  res.winner = int(std::min_element(res.run_losses.begin(), res.run_losses.end()) - res.run_losses.begin());
-  res.pose = best_pose_[res.winner];
-  res.start = res.winner % starts;
-  res.initial_pose = initials_[res.start];
-  res.loss = best_[res.winner];
-  res.history = res.run_histories[res.winner];
+  // The lowest loss among runs [first, last) (-1: none).
+  const auto lowest = [&](int first, int last) {
+    int best = -1;
+    for (int i = first; i < last; ++i)
+      if (best < 0 || res.run_losses[size_t(i)] < res.run_losses[size_t(best)]) best = i;
+    return best;
+  };
+  const auto take = [&](int i) {
+    res.winner = i;
+    res.pose = best_pose_[size_t(i)];
+    res.start = (source_[size_t(i)] >= 0 ? source_[size_t(i)] : i) % starts;
+    res.initial_pose = initials_[size_t(res.start)];
+    res.loss = best_[size_t(i)];
+    res.history = res.run_histories[size_t(i)];
+  };
+  take(lowest(0, B));  // the start's own basin
 
   if (switch_at_ > 0) {  // the first iteration was at the coarse scale: the initial loss at the fine one
     std::vector<LossValue> v;  // of the starts that got a run, as at k = 0
@@ -544,6 +613,25 @@ RefineResult RefineRun::finish(Renderer& renderer) {
       res.loss = v[j];
       res.run_losses[j] = v[j].total;
       res.history = res.run_histories[j];
+    }
+  }
+  // The result's print significance, measured once when needed (the candidate's check, the print turn's).
+  std::optional<double> z_result;
+  const auto result_significance = [&] {
+    if (!z_result) z_result = print_significance(renderer, res.pose);
+    return *z_result;
+  };
+  // A shape-scan candidate replaces the start's basin only when, both converged, the evidence is clear enough
+  // for how far it jumps (jump_is_supported): silhouette and depth barely tell such turns apart.
+  const int candidate = lowest(B, runs);
+  if (candidate >= 0 && std::isfinite(res.loss.total) && res.run_losses[size_t(candidate)] < res.loss.total) {
+    const Pose& turned = best_pose_[size_t(candidate)];
+    const JumpEvidence basin{res.loss.total, result_significance()};
+    const JumpEvidence jump{res.run_losses[size_t(candidate)], print_significance(renderer, turned)};
+    if (jump_is_supported(basin, jump, jump_angle_[size_t(candidate)], o.min_print_significance)) {
+      take(candidate);
+      res.scan_taken = true;
+      z_result = jump.print;
     }
   }
   const bool one_view = meshes_.size() == 1;
@@ -568,9 +656,13 @@ RefineResult RefineRun::finish(Renderer& renderer) {
     if (turned) {
       std::vector<LossValue> v;
       evaluate(renderer, {aligned}, loss_, false, v, true);
-      // The turns of several axes together may cost no more than one may (kPrintLossTolerance).
-      if (v[0].total <= (1.0 + kPrintLossTolerance) * res.loss.total) {
-        res.print_turn = Eigen::AngleAxisd(res.pose.R.transpose() * aligned.R).angle();
+      const double angle = Eigen::AngleAxisd(res.pose.R.transpose() * aligned.R).angle();
+      // The turns of several axes together may cost no more than one may (kPrintLossTolerance), and the print's
+      // registration must not contradict the turn (turn_is_supported).
+      if (v[0].total <= (1.0 + kPrintLossTolerance) * res.loss.total &&
+          turn_is_supported(result_significance(), print_significance(renderer, aligned),
+                            o.min_print_significance)) {
+        res.print_turn = angle;
         res.pose = aligned;
         res.loss = v[0];
       }
@@ -601,14 +693,7 @@ RefineResult RefineRun::finish(Renderer& renderer) {
       const cv::Mat inlier = object & (img.depth > 0) & (diff < o.inlier_threshold);
       scores.depth_inliers = n > 0 ? double(cv::countNonZero(inlier)) / n : 0.0;
     }
-    if (one_view && obs.has_rgb()) {
-      // The object's interior where the observation shows it: 2 px inside the render's full coverage (the
-      // silhouette's gradients fit whenever the shape does) and, with a mask, inside the observed mask.
-      cv::Mat interior = img.coverage >= 0.999f;
-      if (has_mask_) interior &= cv::Mat(obs.mask >= 0.5f);
-      cv::erode(interior, interior, cv::getStructuringElement(cv::MORPH_RECT, cv::Size(5, 5)));
-      res.print = register_print(obs.rgb, img.color, interior, 8, loss_.texture_epsilon);
-    }
+    if (one_view && obs.has_rgb()) res.print = register_render(img);
     if (!one_view) {
       std::vector<LossValue> value;
       renderer.evaluate(cam, *meshes_[v], obs, {res.pose}, loss_, false, value);

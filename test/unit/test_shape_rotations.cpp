@@ -12,6 +12,7 @@
 #include "diffdope/renderer.hpp"
 #include "diffdope/synthetic.hpp"
 #include "labelled_can.hpp"
+#include "refine_run.hpp"
 
 using namespace diffdope;
 
@@ -290,4 +291,96 @@ TEST(Refiner, AboutATrackedStartThePrintIsSoughtOnlyNearby) {
   EXPECT_GT(angle_between(far_track.pose.R, s.truth.R), 8.0);
   const RefineResult far_detection = refined(20, true);
   EXPECT_LT(angle_between(far_detection.pose.R, s.truth.R), 1.0);
+}
+
+namespace {
+
+/// A can's texture: a print of small sharp rectangles over a brightness ramp along the can's side (the side's
+/// band of the atlas, make_cylinder: v in [0.02, 0.48]), rising from `from` to `to` along the axis.
+Texture ramped_print(double from, double to) {
+  const int n = 256;
+  cv::Mat img(n, n, CV_32FC3);
+  for (int y = 0; y < n; ++y) {
+    const double f = double(y) / n, along = f < 0.5 ? f / 0.5 : (f - 0.5) / 0.5;
+    img.row(y).setTo(cv::Scalar::all(from + (to - from) * along));
+  }
+  std::mt19937 rng(11);
+  std::uniform_int_distribution<int> at(0, n - 1), size(4, 14), sign(0, 1);
+  for (int i = 0; i < 400; ++i) {
+    const cv::Rect r(at(rng), at(rng), size(rng), size(rng) / 2 + 2);
+    cv::Mat patch = img(r & cv::Rect(0, 0, n, n));
+    patch += cv::Scalar::all(sign(rng) ? 0.18 : -0.18);
+  }
+  Texture t;
+  t.width = t.height = n;
+  t.source = "ramped print";
+  t.rgb.assign(img.ptr<float>(0), img.ptr<float>(0) + 3 * n * n);
+  return t;
+}
+
+}  // namespace
+
+TEST(Refiner, AFlipThePrintContradictsIsNotTakenFromAGoodStart) {
+  // A printed can lit from one end: the image's brightness rises along the axis the other way from the model's
+  // albedo, so the can turned end over end fits the flat colour term better, although its print is upside
+  // down. A scan that took the lower loss would flip a start 1 degree and 1 mm from the truth by half a turn.
+  const Mesh model = make_cylinder(0.035, 0.11, 64, ramped_print(0.25, 0.75));
+  const Mesh lit = make_cylinder(0.035, 0.11, 64, ramped_print(0.75, 0.25));
+  const Camera cam(420, 420, 159.5, 119.5, 320, 240);
+  Vector6d d;
+  d << 0, 0, 0, 1.3, 0.2, 0.1;
+  const Pose truth(se3_exp(d).R, Eigen::Vector3d(0.0, 0.0, 0.45));
+  const std::unique_ptr<Renderer> renderer = make_cpu_renderer();
+  const Observation obs = synthesize_observation(*renderer, cam, lit, truth, SyntheticNoise(), 5);
+  // The trap is real: the flip's loss is clearly lower than the truth's.
+  const Pose flipped = truth * Pose(Eigen::AngleAxisd(M_PI, Eigen::Vector3d::UnitX()).toRotationMatrix(),
+                                    Eigen::Vector3d::Zero());
+  std::vector<LossValue> v;
+  renderer->evaluate(cam, model, obs, {truth, flipped}, LossOptions(), false, v);
+  ASSERT_LT(v[1].total, 0.97 * v[0].total);
+
+  std::mt19937_64 rng(3);
+  const auto points = metric_points(model);
+  for (int k = 0; k < 3; ++k) {
+    const Pose start = perturb_pose(truth, Eigen::Vector3d::Zero(), M_PI / 180, 0.001, rng);
+    RefinerOptions o;
+    o.image_scale = 1.0;
+    const RefineResult r = Refiner(o).refine(cam, obs, model, start);
+    EXPECT_LT(add_error(points, r.pose, truth), 0.002) << "start " << k;
+    EXPECT_GT(r.scan_turns, 0) << "start " << k;  // the flip was a candidate, and was refused
+    EXPECT_FALSE(r.scan_taken) << "start " << k;
+  }
+}
+
+TEST(JumpEvidence, AJumpNeedsALowerLossAndEvidenceThatGrowsWithItsAngle) {
+  const double quarter = M_PI / 2, half = M_PI, bar = 3.0, none = std::nan("");
+  // Never without a lower loss, whatever the print says.
+  EXPECT_FALSE(jump_is_supported({0.30, 0.0}, {0.30, 20.0}, quarter, bar));
+  // The print contradicts (a flipped label: 13 sigma at the start's basin, none at the flip): a 2 % lower loss
+  // does not jump, nor would any.
+  EXPECT_FALSE(jump_is_supported({0.2525, 13.2}, {0.2475, 0.2}, half, bar));
+  EXPECT_FALSE(jump_is_supported({0.30, 5.0}, {0.10, 3.9}, half, bar));
+  // The print supports it clearly: a loss barely lower is enough. Half a turn needs twice the bar of a small one.
+  EXPECT_TRUE(jump_is_supported({0.30, 0.5}, {0.299, 6.6}, 0.1, bar));
+  EXPECT_FALSE(jump_is_supported({0.30, 0.5}, {0.299, 5.5}, half, bar));
+  EXPECT_TRUE(jump_is_supported({0.30, 0.5}, {0.299, 6.6}, half, bar));
+  // The print neither contradicts nor decides (a label turned about its axis registers alike): the loss
+  // decides, by a margin that grows with the angle.
+  EXPECT_NEAR(jump_margin(0.0), kJumpMargin, 1e-12);
+  EXPECT_NEAR(jump_margin(half), 5 * kJumpMargin, 1e-12);
+  EXPECT_TRUE(jump_is_supported({0.2653, 6.29}, {0.2507, 6.32}, M_PI / 6, bar));   // 5.5 % lower
+  EXPECT_FALSE(jump_is_supported({0.2653, 6.29}, {0.2627, 6.32}, M_PI / 6, bar));  // 1 % lower
+  EXPECT_FALSE(jump_is_supported({0.30, none}, {0.288, none}, half, bar));  // 4 %: not enough for half a turn
+  EXPECT_TRUE(jump_is_supported({0.30, none}, {0.28, none}, half, bar));    // 6.7 %
+  // The print not weighed (bar 0): the loss alone.
+  EXPECT_TRUE(jump_is_supported({0.2525, 13.2}, {0.2, 0.2}, half, 0.0));
+}
+
+TEST(JumpEvidence, APrintTurnIsRefusedWhereTheRegistrationFalls) {
+  EXPECT_TRUE(turn_is_supported(6.5, 6.4, 3.0));
+  EXPECT_TRUE(turn_is_supported(2.0, 8.0, 3.0));
+  EXPECT_FALSE(turn_is_supported(6.0, 4.5, 3.0));
+  EXPECT_FALSE(turn_is_supported(6.0, std::nan(""), 3.0));
+  EXPECT_TRUE(turn_is_supported(std::nan(""), 1.0, 3.0));  // nothing measured at the result: nothing to lose
+  EXPECT_TRUE(turn_is_supported(6.0, 1.0, 0.0));           // the print not weighed
 }
