@@ -89,6 +89,10 @@ class Mesh {
   int num_vertices() const { return static_cast<int>(positions.size()); }
   int num_triangles() const { return static_cast<int>(triangles.size() / 3); }
   bool has_texture() const { return !textures.empty(); }
+  /// No print: the whole surface is one colour (no texture, or only uniform ones, and one vertex colour, within
+  /// kPlainColourSpread): a CAD model, a painted part. Valid after finalize().
+  bool plain() const { return plain_; }
+  static constexpr float kPlainColourSpread = 2.0f / 255.0f;
 
   // Geometry summaries (valid after finalize()).
   Eigen::Vector3d bbox_min() const { return bbox_min_; }
@@ -139,6 +143,7 @@ class Mesh {
   std::vector<unsigned char> seams_;
   std::vector<float> tri_uv_area_;
   bool closed_outward_ = false;
+  bool plain_ = false;
   uint64_t content_id_ = 0;
   std::vector<MeshLod> lods_;
 };

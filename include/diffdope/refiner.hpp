@@ -77,6 +77,11 @@ struct RefinerOptions {
   /// starts (ObjectTarget::explore false) or refine_views(). Radians; 0 = off (the paper's algorithm).
   double retry_turn = 0.52;  // [0, pi]
   LossOptions loss;             // term weights (all 1 as in the paper) and robustness constants
+  /// A plain model (Mesh::plain(): no print, one colour) gets no colour term: its flat render against a lit image
+  /// sees only the lighting (the paper's T-LESS results are better without RGB). true = compare its colour anyway.
+  /// Kept when nothing else observes the object (RGB alone, no mask): the colour term is then the silhouette's
+  /// only evidence. RefineResult::loss_used says what was used.
+  bool plain_model_rgb = false;
   uint64_t seed = 0;            // learning-rate draws; same seed, same inputs -> same result
   /// Stop when no run has improved its best loss by more than early_stop_tolerance (relative) for
   /// early_stop_patience iterations. 0 = always run all iterations.
@@ -94,10 +99,14 @@ struct RefinerOptions {
   /// Verdict thresholds (verdict.hpp): plausible when mask IoU >= min_mask_iou (if a mask was given), the depth
   /// inlier fraction >= min_depth_inliers (if depth was given) and the print lines up with the image's at least
   /// min_print_significance standard deviations above its chance level (if the model has a print and rgb was
-  /// given; 0 = not weighed). 3 = the usual bar of a significant peak, not fitted to any data set.
+  /// given; 0 = not weighed, neither here nor in the shape scan's and print alignment's choices). The verdict asks
+  /// whether the evidence contradicts the pose, not whether it proves it: a weak print (a white bottle's small
+  /// label) lines up only 1-3 standard deviations above chance at the right pose, while a print that is not
+  /// even one above it does not line up at all. Between the bar and clear evidence (kClearPrint, 3) the shape
+  /// must fit better (judge() in verdict.hpp); the scan's choices use kClearPrint too.
   double min_mask_iou = 0.5;       // [0, 1]
   double min_depth_inliers = 0.5;  // [0, 1]
-  double min_print_significance = 3.0;  // [0, 100]
+  double min_print_significance = 1.0;  // [0, 100]
   /// The loss is probed around the result at this mean displacement of the model surface (metres, the unit of
   /// ADD): RefineResult::curvature, the loss's curvature and its least constrained direction (pose_curvature.hpp;
   /// 15 evaluations, ~1 % of a default refinement). 0 = no probe.
@@ -129,6 +138,10 @@ struct RefineResult {
   Pose pose;                          // refined model pose in the camera frame (metres)
   Pose initial_pose;                  // the initial pose the winning run started from
   LossValue loss;                     // winner's final loss, per term (unweighted means) and total
+  /// The loss as used: RefinerOptions::loss with the refiner's own choices, a term without its observation at
+  /// weight 0 (no mask: weight_mask; no depth: weight_depth; no rgb: weight_rgb and weight_edges) and a plain
+  /// model's colour term off (RefinerOptions::plain_model_rgb).
+  LossOptions loss_used;
   double initial_loss = 0;            // loss of the initial pose (at image_scale)
   /// Best loss of every run (at image_scale; +inf for runs dropped in the coarse phase): the batch_size runs from
   /// the starts, then the shape scan's candidates (scan_turns). The winner has the lowest loss among the first
@@ -153,7 +166,9 @@ struct RefineResult {
   int iterations = 0;                 // iterations actually run (early stop)
   double time_ms = 0;                 // wall time of refine() (refine_all(): from the call's start to this object's end)
   // Quality scores at the refined pose (at the refiner's image scale).
-  double mask_iou = -1;               // IoU of rendered and observed masks; -1 without a mask
+  double mask_iou = -1;               // IoU of rendered and observed masks (with depth, the render less where the
+                                      // observed depth shows an occluder in front: loss.occlusion_margin); -1
+                                      // without a mask
   double depth_inliers = -1;          // fraction of object pixels (observed mask, else the render's) with a depth
                                       // reading within inlier_threshold of the render; -1 without depth
   bool converged = false;             // the winner's loss stopped improving (relative change < 1 % over the last 10 %)
@@ -173,6 +188,9 @@ struct RefineResult {
   };
   std::vector<ViewScores> view_scores;
 };
+
+/// The names of the terms a loss weighs (weight > 0): "rgb", "depth", "mask", "edges", "texture".
+std::vector<std::string> used_terms(const LossOptions& loss);
 
 /// Whether the retry of a rejected result (RefinerOptions::retry_turn) replaces the first: only when the verdict
 /// accepts it and its loss is lower. A retry rejected too keeps the first result, the one nearer the caller's

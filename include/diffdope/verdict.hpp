@@ -52,8 +52,14 @@ struct Verdict {
   bool plausible = true;  // every available evidence passes its threshold
 };
 
+/// Standard deviations above its chance level at which a print's registration is clear evidence on its own: the
+/// usual bar of a significant peak, not fitted to any data.
+constexpr double kClearPrint = 3.0;
+
 /// Thresholds as in RefinerOptions: min_mask_iou, min_depth_inliers (fractions in [0, 1]) and
-/// min_print_significance (standard deviations; 0 = the print is not weighed).
+/// min_print_significance (standard deviations; 0 = the print is not weighed). A print below its bar contradicts
+/// the pose. One that lines up, but less than clearly (z < kClearPrint), raises the shape's thresholds t towards
+/// 1: to t + (1 - t) / 2 at the bar, t at kClearPrint, linearly between (a weak print leaves more to the shape).
 Verdict judge(const VerdictEvidence& e, double min_mask_iou, double min_depth_inliers, double min_print_significance);
 
 }  // namespace diffdope

@@ -215,6 +215,29 @@ void Mesh::finalize() {
   }
   if (!any_area) throw std::runtime_error(who + "every triangle is degenerate (no area)");
   diameter_ = compute_diameter(positions);
+  {  // one colour over the whole surface: the drawn vertex colours and the used textures' texels
+    Eigen::Array3f lo = Eigen::Array3f::Constant(1e9f), hi = Eigen::Array3f::Constant(-1e9f);
+    const auto see = [&](float r, float g, float b) {
+      lo = lo.min(Eigen::Array3f(r, g, b));
+      hi = hi.max(Eigen::Array3f(r, g, b));
+    };
+    std::vector<bool> used_texture(textures.size(), false);
+    for (int t = 0; t < nt; ++t) {
+      if (tri_texture[size_t(t)] >= 0) {
+        used_texture[size_t(tri_texture[size_t(t)])] = true;
+        continue;
+      }
+      for (int k = 0; k < 3; ++k) {
+        const Vec3f& c = colors[size_t(triangles[3 * size_t(t) + k])];
+        see(c.x, c.y, c.z);
+      }
+    }
+    for (size_t i = 0; i < textures.size(); ++i)
+      if (used_texture[i])
+        for (size_t j = 0; j + 2 < textures[i].rgb.size(); j += 3)
+          see(textures[i].rgb[j], textures[i].rgb[j + 1], textures[i].rgb[j + 2]);
+    plain_ = ((hi - lo) <= kPlainColourSpread).all();
+  }
   build_adjacency();
   build_mipmaps();
   build_lods();

@@ -25,16 +25,16 @@ constexpr double kJumpMargin = 0.01;
 double jump_margin(double angle);
 /// Whether the evidence supports a jump from the start's basin (`from`) to a shape-scan candidate (`to`),
 /// turned `angle` radians from the run it came from, both converged. Never without a lower loss. With the
-/// print measured at both (and min_significance > 0): never when it contradicts the jump (kPrintContradiction);
-/// always when it registers at the candidate, and by that much more than at the basin, at least
-/// min_significance * (1 + angle / pi) standard deviations. Otherwise the loss decides, lower by more than
-/// jump_margin(angle).
-bool jump_is_supported(const JumpEvidence& from, const JumpEvidence& to, double angle, double min_significance);
+/// print measured at both (and weighed: RefinerOptions::min_print_significance > 0): never when it contradicts
+/// the jump (kPrintContradiction); always when it registers at the candidate, and by that much more than at the
+/// basin, at least kClearPrint * (1 + angle / pi) standard deviations (half a turn needs twice the evidence of a
+/// small one). Otherwise the loss decides, lower by more than jump_margin(angle).
+bool jump_is_supported(const JumpEvidence& from, const JumpEvidence& to, double angle, bool weigh_print);
 /// Whether the print's registration allows the print alignment's turn from a pose whose print significance is
 /// z_from to one whose is z_to: not lower by more than kPrintContradiction (the alignment's texture term found
-/// the turn; a registration that falls says the turn moved the print away). Always with min_significance 0 or
-/// z_from not measured.
-bool turn_is_supported(double z_from, double z_to, double min_significance);
+/// the turn; a registration that falls says the turn moved the print away). Always when the print is not
+/// weighed or z_from not measured.
+bool turn_is_supported(double z_from, double z_to, bool weigh_print);
 
 class RefineRun {
  public:

@@ -138,6 +138,14 @@ cv::Mat window_mask(const Camera& cam, const Mesh& mesh, const Pose& pose, doubl
 
 }  // namespace
 
+std::vector<std::string> used_terms(const LossOptions& l) {
+  std::vector<std::string> out;
+  for (const auto& [name, weight] : {std::pair<const char*, double>{"rgb", l.weight_rgb}, {"depth", l.weight_depth},
+                                     {"mask", l.weight_mask}, {"edges", l.weight_edges}, {"texture", l.weight_texture}})
+    if (weight > 0) out.push_back(name);
+  return out;
+}
+
 bool retry_replaces(const RefineResult& first, const RefineResult& retry) {
   return retry.error.empty() && retry.plausible && retry.loss.total < first.loss.total;
 }
@@ -392,6 +400,16 @@ RefineRun::RefineRun(const RefinerOptions& o, const std::vector<RefineView>& vie
     if (switch_at_ > 0) coarse_.push_back(make_level(view, o.image_scale * o.coarse_scale, coarse_frame, false));
   }
   if (!has_mask_) loss_.weight_mask = 0;  // the window is not an observation of the silhouette
+  bool all_plain = true, any_depth = false, any_rgb = false;
+  for (const RefineView& view : views) {
+    all_plain = all_plain && view.mesh->plain();
+    any_depth = any_depth || view.observed.has_depth();
+    any_rgb = any_rgb || view.observed.has_rgb();
+  }
+  if (all_plain && !o.plain_model_rgb && (has_mask_ || any_depth)) loss_.weight_rgb = 0;
+  res_.loss_used = loss_;
+  if (!any_depth) res_.loss_used.weight_depth = 0;
+  if (!any_rgb) res_.loss_used.weight_rgb = res_.loss_used.weight_edges = res_.loss_used.weight_texture = 0;
   pivot_model_ = pivot_model ? *pivot_model : meshes_.front()->center();
   scan_loss_ = loss_;
   scan_loss_.weight_texture += o.explore_texture_weight;
@@ -560,17 +578,17 @@ double RefineRun::print_significance(Renderer& renderer, const Pose& pose) const
 
 double jump_margin(double angle) { return kJumpMargin * (1.0 + 4.0 * std::abs(angle) / M_PI); }
 
-bool jump_is_supported(const JumpEvidence& from, const JumpEvidence& to, double angle, double min_significance) {
+bool jump_is_supported(const JumpEvidence& from, const JumpEvidence& to, double angle, bool weigh_print) {
   if (!(to.loss < from.loss)) return false;
-  const bool weighed = min_significance > 0 && std::isfinite(from.print) && std::isfinite(to.print);
+  const bool weighed = weigh_print && std::isfinite(from.print) && std::isfinite(to.print);
   if (weighed && to.print < from.print - kPrintContradiction) return false;
-  const double need = min_significance * (1.0 + std::abs(angle) / M_PI);
+  const double need = kClearPrint * (1.0 + std::abs(angle) / M_PI);
   if (weighed && to.print >= need && to.print - std::max(from.print, 0.0) >= need) return true;
   return to.loss < (1.0 - jump_margin(angle)) * from.loss;
 }
 
-bool turn_is_supported(double z_from, double z_to, double min_significance) {
-  if (!(min_significance > 0) || !std::isfinite(z_from)) return true;
+bool turn_is_supported(double z_from, double z_to, bool weigh_print) {
+  if (!weigh_print || !std::isfinite(z_from)) return true;
   return std::isfinite(z_to) && z_to >= z_from - kPrintContradiction;
 }
 
@@ -628,7 +646,7 @@ RefineResult RefineRun::finish(Renderer& renderer) {
     const Pose& turned = best_pose_[size_t(candidate)];
     const JumpEvidence basin{res.loss.total, result_significance()};
     const JumpEvidence jump{res.run_losses[size_t(candidate)], print_significance(renderer, turned)};
-    if (jump_is_supported(basin, jump, jump_angle_[size_t(candidate)], o.min_print_significance)) {
+    if (jump_is_supported(basin, jump, jump_angle_[size_t(candidate)], o.min_print_significance > 0)) {
       take(candidate);
       res.scan_taken = true;
       z_result = jump.print;
@@ -661,7 +679,7 @@ RefineResult RefineRun::finish(Renderer& renderer) {
       // registration must not contradict the turn (turn_is_supported).
       if (v[0].total <= (1.0 + kPrintLossTolerance) * res.loss.total &&
           turn_is_supported(result_significance(), print_significance(renderer, aligned),
-                            o.min_print_significance)) {
+                            o.min_print_significance > 0)) {
         res.print_turn = angle;
         res.pose = aligned;
         res.loss = v[0];
@@ -680,8 +698,15 @@ RefineResult RefineRun::finish(Renderer& renderer) {
     const cv::Mat rendered = img.coverage >= 0.5f;
     rendered_pixels += cv::countNonZero(rendered);
     if (has_mask_) {
+      // Where the observed depth shows an occluder in front of the render (as the loss's mask term), the object
+      // is hidden: its visible mask rightly leaves it out, so the render's IoU leaves it out too.
+      cv::Mat visible = rendered;
+      if (obs.has_depth() && loss_.occlusion_margin > 0) {
+        cv::Mat in_front = (obs.depth > 0) & (obs.depth < img.depth - loss_.occlusion_margin);
+        visible = rendered & ~in_front;
+      }
       const cv::Mat observed_mask = obs.mask >= 0.5f;
-      const double inter = cv::countNonZero(rendered & observed_mask), uni = cv::countNonZero(rendered | observed_mask);
+      const double inter = cv::countNonZero(visible & observed_mask), uni = cv::countNonZero(visible | observed_mask);
       scores.mask_iou = uni > 0 ? inter / uni : 0.0;
     }
     if (obs.has_depth()) {

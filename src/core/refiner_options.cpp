@@ -70,6 +70,7 @@ RefinerOptions parse(const YAML::Node& root, RefinerOptions o, const std::string
     read(root, "min_depth_inliers", o.min_depth_inliers, used);
     read(root, "min_print_significance", o.min_print_significance, used);
     read(root, "probe_distance", o.probe_distance, used);
+    read(root, "plain_model_rgb", o.plain_model_rgb, used);
     read(root, "device", o.device, used);
     used.insert("loss");
     if (const YAML::Node l = root["loss"]) {

@@ -86,13 +86,19 @@ Verdict judge(const VerdictEvidence& e, double min_mask_iou, double min_depth_in
     weakest = std::min(weakest, score);
     v.plausible = v.plausible && pass;
   };
-  if (e.mask_iou >= 0) weigh(fraction_score(e.mask_iou, min_mask_iou), e.mask_iou >= min_mask_iou);
+  const bool print_weighed = std::isfinite(e.print_significance) && min_print_significance > 0;
+  const double z = e.print_significance;
+  // A print that lines up only weakly (between the bar and kClearPrint) leaves more to the shape: its thresholds
+  // rise towards 1 by up to half the way, in proportion to the print's shortfall.
+  const double clear = std::max(kClearPrint, min_print_significance);
+  const double shortfall = print_weighed && z < clear && clear > min_print_significance
+                               ? std::clamp((clear - z) / (clear - min_print_significance), 0.0, 1.0)
+                               : 0.0;
+  const auto raised = [&](double t) { return t + 0.5 * shortfall * (1.0 - t); };
+  if (e.mask_iou >= 0) weigh(fraction_score(e.mask_iou, raised(min_mask_iou)), e.mask_iou >= raised(min_mask_iou));
   if (e.depth_inliers >= 0)
-    weigh(fraction_score(e.depth_inliers, min_depth_inliers), e.depth_inliers >= min_depth_inliers);
-  if (std::isfinite(e.print_significance) && min_print_significance > 0) {
-    const double z = e.print_significance;
-    weigh(z > 0 ? z / (z + min_print_significance) : 0.0, z >= min_print_significance);
-  }
+    weigh(fraction_score(e.depth_inliers, raised(min_depth_inliers)), e.depth_inliers >= raised(min_depth_inliers));
+  if (print_weighed) weigh(z > 0 ? z / (z + min_print_significance) : 0.0, z >= min_print_significance);
   if (std::isfinite(weakest)) v.confidence = weakest;
   return v;
 }

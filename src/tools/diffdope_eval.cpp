@@ -228,7 +228,9 @@ int main(int argc, char** argv) {
           line["depth_inliers"] = r.depth_inliers;
           line["confidence"] = r.confidence;
           line["loss_terms"] = {{"rgb", r.loss.rgb}, {"depth", r.loss.depth}, {"mask", r.loss.mask}};
+          line["terms"] = used_terms(r.loss_used);
           line["scan_turns"] = r.scan_turns;
+          line["scan_taken"] = r.scan_taken;
           line["print_turn_deg"] = r.print_turn * 180.0 / M_PI;
           line["retried"] = r.retried;
           line["print"] = {{"ncc", r.print.ncc}, {"best_ncc", r.print.best_ncc}, {"best_dx", r.print.best_dx},

@@ -218,6 +218,7 @@ nlohmann::ordered_json pose_json(const RefineResult& r) {
               {"matrix", m16},
               {"loss", r.loss.total},
               {"loss_terms", {{"rgb", r.loss.rgb}, {"depth", r.loss.depth}, {"mask", r.loss.mask}}},
+              {"terms", used_terms(r.loss_used)},
               {"initial_loss", r.initial_loss},
               {"iterations", r.iterations},
               {"time_ms", r.time_ms},

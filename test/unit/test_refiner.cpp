@@ -520,3 +520,44 @@ TEST(Refiner, ARetryReplacesTheFirstResultOnlyWhenAcceptedAndLower) {
   retry.error = "lost";
   EXPECT_FALSE(retry_replaces(first, retry));
 }
+
+TEST(Refiner, APlainModelGetsNoColourTermUnlessAskedAndTheResultSaysWhichTermsWereUsed) {
+  // A grey box against a lit, colourful image of it: the flat colour can only mislead.
+  const Mesh plain = make_box(Eigen::Vector3d(0.08, 0.05, 0.12), make_flat_texture(Eigen::Vector3f(0.6f, 0.6f, 0.6f)));
+  const Mesh printed = make_box(Eigen::Vector3d(0.08, 0.05, 0.12), make_label_texture(64, 2));
+  EXPECT_TRUE(plain.plain());
+  EXPECT_FALSE(printed.plain());
+  const Camera cam(400, 400, 159.5, 119.5, 320, 240);
+  const Pose truth(Eigen::AngleAxisd(0.5, Eigen::Vector3d(1, 1, 0).normalized()).toRotationMatrix(),
+                   Eigen::Vector3d(0.01, 0, 0.5));
+  const Observation obs = synthesize_observation(*make_cpu_renderer(), cam, printed, truth, SyntheticNoise(), 2);
+  RefinerOptions o;
+  o.batch_size = 2;
+  o.iterations = 2;
+  o.image_scale = 1.0;
+  const auto terms = [&](const Mesh& mesh, const Observation& in) {
+    return used_terms(Refiner(o).refine(cam, in, mesh, truth).loss_used);
+  };
+  using T = std::vector<std::string>;
+  EXPECT_EQ(terms(printed, obs), (T{"rgb", "depth", "mask"}));
+  EXPECT_EQ(terms(plain, obs), (T{"depth", "mask"}));
+  Observation no_mask = obs;
+  no_mask.mask = cv::Mat();
+  EXPECT_EQ(terms(plain, no_mask), (T{"depth"}));
+  Observation rgb_alone = no_mask;
+  rgb_alone.depth = cv::Mat();
+  EXPECT_EQ(terms(plain, rgb_alone), (T{"rgb"}));  // the only evidence left: kept
+  o.plain_model_rgb = true;
+  EXPECT_EQ(terms(plain, obs), (T{"rgb", "depth", "mask"}));
+  // Loaded meshes: vertex colours of one value are plain, two are not.
+  Mesh painted = plain;
+  painted.textures.clear();
+  painted.tri_texture.clear();
+  painted.uvs.clear();
+  painted.colors.assign(painted.positions.size(), Vec3f{0.2f, 0.3f, 0.4f});
+  painted.finalize();
+  EXPECT_TRUE(painted.plain());
+  painted.colors[0] = Vec3f{0.9f, 0.3f, 0.4f};
+  painted.finalize();
+  EXPECT_FALSE(painted.plain());
+}

@@ -353,34 +353,35 @@ TEST(Refiner, AFlipThePrintContradictsIsNotTakenFromAGoodStart) {
 }
 
 TEST(JumpEvidence, AJumpNeedsALowerLossAndEvidenceThatGrowsWithItsAngle) {
-  const double quarter = M_PI / 2, half = M_PI, bar = 3.0, none = std::nan("");
+  const double quarter = M_PI / 2, half = M_PI, none = std::nan("");
+  const bool weigh = true;
   // Never without a lower loss, whatever the print says.
-  EXPECT_FALSE(jump_is_supported({0.30, 0.0}, {0.30, 20.0}, quarter, bar));
+  EXPECT_FALSE(jump_is_supported({0.30, 0.0}, {0.30, 20.0}, quarter, weigh));
   // The print contradicts (a flipped label: 13 sigma at the start's basin, none at the flip): a 2 % lower loss
   // does not jump, nor would any.
-  EXPECT_FALSE(jump_is_supported({0.2525, 13.2}, {0.2475, 0.2}, half, bar));
-  EXPECT_FALSE(jump_is_supported({0.30, 5.0}, {0.10, 3.9}, half, bar));
+  EXPECT_FALSE(jump_is_supported({0.2525, 13.2}, {0.2475, 0.2}, half, weigh));
+  EXPECT_FALSE(jump_is_supported({0.30, 5.0}, {0.10, 3.9}, half, weigh));
   // The print supports it clearly: a loss barely lower is enough. Half a turn needs twice the bar of a small one.
-  EXPECT_TRUE(jump_is_supported({0.30, 0.5}, {0.299, 6.6}, 0.1, bar));
-  EXPECT_FALSE(jump_is_supported({0.30, 0.5}, {0.299, 5.5}, half, bar));
-  EXPECT_TRUE(jump_is_supported({0.30, 0.5}, {0.299, 6.6}, half, bar));
+  EXPECT_TRUE(jump_is_supported({0.30, 0.5}, {0.299, 6.6}, 0.1, weigh));
+  EXPECT_FALSE(jump_is_supported({0.30, 0.5}, {0.299, 5.5}, half, weigh));
+  EXPECT_TRUE(jump_is_supported({0.30, 0.5}, {0.299, 6.6}, half, weigh));
   // The print neither contradicts nor decides (a label turned about its axis registers alike): the loss
   // decides, by a margin that grows with the angle.
   EXPECT_NEAR(jump_margin(0.0), kJumpMargin, 1e-12);
   EXPECT_NEAR(jump_margin(half), 5 * kJumpMargin, 1e-12);
-  EXPECT_TRUE(jump_is_supported({0.2653, 6.29}, {0.2507, 6.32}, M_PI / 6, bar));   // 5.5 % lower
-  EXPECT_FALSE(jump_is_supported({0.2653, 6.29}, {0.2627, 6.32}, M_PI / 6, bar));  // 1 % lower
-  EXPECT_FALSE(jump_is_supported({0.30, none}, {0.288, none}, half, bar));  // 4 %: not enough for half a turn
-  EXPECT_TRUE(jump_is_supported({0.30, none}, {0.28, none}, half, bar));    // 6.7 %
-  // The print not weighed (bar 0): the loss alone.
-  EXPECT_TRUE(jump_is_supported({0.2525, 13.2}, {0.2, 0.2}, half, 0.0));
+  EXPECT_TRUE(jump_is_supported({0.2653, 6.29}, {0.2507, 6.32}, M_PI / 6, weigh));   // 5.5 % lower
+  EXPECT_FALSE(jump_is_supported({0.2653, 6.29}, {0.2627, 6.32}, M_PI / 6, weigh));  // 1 % lower
+  EXPECT_FALSE(jump_is_supported({0.30, none}, {0.288, none}, half, weigh));  // 4 %: not enough for half a turn
+  EXPECT_TRUE(jump_is_supported({0.30, none}, {0.28, none}, half, weigh));    // 6.7 %
+  // The print not weighed (min_print_significance 0): the loss alone.
+  EXPECT_TRUE(jump_is_supported({0.2525, 13.2}, {0.2, 0.2}, half, false));
 }
 
 TEST(JumpEvidence, APrintTurnIsRefusedWhereTheRegistrationFalls) {
-  EXPECT_TRUE(turn_is_supported(6.5, 6.4, 3.0));
-  EXPECT_TRUE(turn_is_supported(2.0, 8.0, 3.0));
-  EXPECT_FALSE(turn_is_supported(6.0, 4.5, 3.0));
-  EXPECT_FALSE(turn_is_supported(6.0, std::nan(""), 3.0));
-  EXPECT_TRUE(turn_is_supported(std::nan(""), 1.0, 3.0));  // nothing measured at the result: nothing to lose
-  EXPECT_TRUE(turn_is_supported(6.0, 1.0, 0.0));           // the print not weighed
+  EXPECT_TRUE(turn_is_supported(6.5, 6.4, true));
+  EXPECT_TRUE(turn_is_supported(2.0, 8.0, true));
+  EXPECT_FALSE(turn_is_supported(6.0, 4.5, true));
+  EXPECT_FALSE(turn_is_supported(6.0, std::nan(""), true));
+  EXPECT_TRUE(turn_is_supported(std::nan(""), 1.0, true));  // nothing measured at the result: nothing to lose
+  EXPECT_TRUE(turn_is_supported(6.0, 1.0, false));         // the print not weighed
 }

@@ -128,3 +128,54 @@ TEST(Verdict, TheRefinerTrustsARightPrintAndNotAWrongTurn) {
   EXPECT_GT(right.confidence, 0.5);
   EXPECT_LT(wrong.confidence, 0.5);
 }
+
+TEST(Verdict, AnOccludedObjectAtItsTruthKeepsItsMaskIoU) {
+  // A box in front hides part of the can: the can's visible mask leaves that part out, and so must the render's
+  // side of the IoU wherever the observed depth shows the occluder in front (else IoU = the visible fraction).
+  const test::LabelledCan s = test::labelled_can();
+  const Mesh box = make_box(Eigen::Vector3d(0.05, 0.05, 0.05), make_label_texture(64, 4));
+  const Pose box_pose(Eigen::Matrix3d::Identity(), s.truth.t + Eigen::Vector3d(0.03, 0.0, -0.1));
+  const SyntheticScene scene =
+      synthesize_scene(*make_cpu_renderer(), s.cam, {{&s.can, s.truth}, {&box, box_pose}}, SyntheticNoise(), 9);
+  ASSERT_LT(scene.visible_fraction[0], 0.85);
+  ASSERT_GT(scene.visible_fraction[0], 0.4);
+  Observation obs;
+  obs.rgb = scene.rgb;
+  obs.mask = scene.visible_masks[0];
+  RefinerOptions o;
+  o.batch_size = 4;
+  o.iterations = 0;  // score the start itself
+  o.image_scale = 1.0;
+  const RefineResult rgb_only = Refiner(o).refine(s.cam, obs, s.can, s.truth);
+  EXPECT_NEAR(rgb_only.mask_iou, scene.visible_fraction[0], 0.05);  // without depth the occluder is not seen
+  obs.depth = scene.depth;
+  const RefineResult with_depth = Refiner(o).refine(s.cam, obs, s.can, s.truth);
+  EXPECT_GT(with_depth.mask_iou, 0.95);
+  // A wrong pose is still told apart: moved by a third of its width, the IoU falls.
+  const Pose moved(s.truth.R, s.truth.t + Eigen::Vector3d(0.025, 0, 0));
+  EXPECT_LT(Refiner(o).refine(s.cam, obs, s.can, moved).mask_iou, 0.8);
+}
+
+TEST(Verdict, AWeakPrintLeavesMoreToTheShape) {
+  VerdictEvidence e;
+  e.mask_iou = 0.74;
+  e.depth_inliers = 0.9;
+  e.print_significance = 5.0;  // clear: the shape's own thresholds
+  EXPECT_TRUE(judge(e, 0.5, 0.5, 1.0).plausible);
+  e.print_significance = 1.0;  // at the bar: IoU must reach 0.75
+  EXPECT_FALSE(judge(e, 0.5, 0.5, 1.0).plausible);
+  e.mask_iou = 0.76;
+  EXPECT_TRUE(judge(e, 0.5, 0.5, 1.0).plausible);
+  EXPECT_DOUBLE_EQ(judge(e, 0.5, 0.5, 1.0).confidence, 0.5);  // the print's own score, 1 / (1 + 1)
+  e.print_significance = 2.0;  // half way: 0.625
+  e.mask_iou = 0.62;
+  EXPECT_FALSE(judge(e, 0.5, 0.5, 1.0).plausible);
+  e.mask_iou = 0.63;
+  EXPECT_TRUE(judge(e, 0.5, 0.5, 1.0).plausible);
+  e.print_significance = 0.9;  // below the bar: contradicted, however well the shape fits
+  e.mask_iou = e.depth_inliers = 1.0;
+  EXPECT_FALSE(judge(e, 0.5, 0.5, 1.0).plausible);
+  e.print_significance = std::numeric_limits<double>::quiet_NaN();  // not measured: the shape's own thresholds
+  e.mask_iou = 0.55;
+  EXPECT_TRUE(judge(e, 0.5, 0.5, 1.0).plausible);
+}
