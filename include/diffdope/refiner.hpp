@@ -76,6 +76,14 @@ struct RefinerOptions {
   /// into a wrong basin (a box seen edge-on) mostly has a turned start in the right one. Costs a second refinement, for rejected results only; never for tracked
   /// starts (ObjectTarget::explore false) or refine_views(). Radians; 0 = off (the paper's algorithm).
   double retry_turn = 0.52;  // [0, pi]
+  /// Polish: after the descent and the shape scan's choice, before the print alignment, polish_runs runs go on
+  /// from the chosen pose for polish_iterations more steps at image_scale, at small rates (lr_low, doubling
+  /// per run, decayed as the descent's), and the lowest loss seen is kept. The descent's winners from hard
+  /// starts are mostly large-rate runs still hopping 1-3 mm about the minimum when the iterations end (README
+  /// figures). 0 = off (the paper's algorithm); never for tracked starts (ObjectTarget::explore false) nor with
+  /// iterations 0 (scoring the start).
+  int polish_iterations = 30;  // [0, kMaxIterations]
+  int polish_runs = 4;         // [1, 16]
   LossOptions loss;             // term weights (all 1 as in the paper) and robustness constants
   /// A plain model (Mesh::plain(): no print, one colour) gets no colour term: its flat render against a lit image
   /// sees only the lighting (the paper's T-LESS results are better without RGB). true = compare its colour anyway.
@@ -164,6 +172,7 @@ struct RefineResult {
                                       // (retry_turn): the fields are the kept one's (initial_loss the
                                       // caller's starts'), start may then index a turned start, time_ms is both
   int iterations = 0;                 // iterations actually run (early stop)
+  int polish_iterations = 0;          // iterations of the polish (RefinerOptions::polish_iterations) run
   double time_ms = 0;                 // wall time of refine() (refine_all(): from the call's start to this object's end)
   // Quality scores at the refined pose (at the refiner's image scale).
   double mask_iou = -1;               // IoU of rendered and observed masks (with depth, the render less where the

@@ -38,6 +38,13 @@ bool turn_is_supported(double z_from, double z_to, bool weigh_print);
 
 class RefineRun {
  public:
+  /// Candidate runs the shape scan adds at most: of the turns some run prefers, those of lowest loss.
+  static constexpr int kScanCandidates = 1;
+  /// The polish stops once its best loss has not fallen by kPolishTolerance (relative) for kPolishPatience
+  /// iterations: a result that was already converged (an easy start) costs a few evaluations, not all.
+  static constexpr int kPolishPatience = 5;
+  static constexpr double kPolishTolerance = 1e-4;
+
   /// Validates the input and prepares the scaled images, the loss and the learning rates. Throws
   /// std::invalid_argument on unusable input (as Refiner::refine()). `views`: one for an object; several share
   /// the pose (Refiner::refine_views()). `scaled_frame` (refine_all, one view): the frame's rgb / depth / edges
@@ -75,6 +82,8 @@ class RefineRun {
                 std::vector<LossValue>& out, bool fine = false);
   /// Winner and quality scores (renders the refined pose once per view).
   RefineResult finish(Renderer& renderer);
+  /// Iterations of the last descent from the chosen pose (RefinerOptions::polish_iterations; 0: none).
+  void set_polish(int iterations) { polish_iterations_ = iterations; }
   /// How the print of a render registers with the image (one view with rgb; else not measured).
   PrintRegistration register_render(const RenderImage& img) const;
   /// PrintRegistration::significance() at `pose` (one render at the fine scale); NaN when not measurable (no
@@ -123,6 +132,9 @@ class RefineRun {
   std::vector<Pose> turns_;  // model-frame turns tried on every run
   std::vector<ShapeRotation> print_axes_;
   double print_range_ = 0;
+  int polish_iterations_ = 0;
+  /// The last descent (RefinerOptions::polish_iterations) from res.pose, keeping the lowest loss seen.
+  void polish(Renderer& renderer, RefineResult& res);
   int scan_at_ = -1;         // the iteration whose batch() is preceded by the scan (-1: none)
   bool scanning_ = false, scanned_ = false;
   double best_overall_;

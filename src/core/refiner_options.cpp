@@ -71,6 +71,8 @@ RefinerOptions parse(const YAML::Node& root, RefinerOptions o, const std::string
     read(root, "min_print_significance", o.min_print_significance, used);
     read(root, "probe_distance", o.probe_distance, used);
     read(root, "plain_model_rgb", o.plain_model_rgb, used);
+    read(root, "polish_iterations", o.polish_iterations, used);
+    read(root, "polish_runs", o.polish_runs, used);
     read(root, "device", o.device, used);
     used.insert("loss");
     if (const YAML::Node l = root["loss"]) {
@@ -211,6 +213,8 @@ void RefinerOptions::validate() const {
   check("explore_texture_weight", explore_texture_weight, 0, LossOptions::kMaxWeight);
   check("print_search", print_search, 0, M_PI);
   check("retry_turn", retry_turn, 0, M_PI);
+  check("polish_iterations", polish_iterations, 0, kMaxIterations, " (0: off)");
+  check("polish_runs", polish_runs, 1, 16);
   if (coarse_fraction > 0 && image_scale * coarse_scale < kMinImageScale) {
     std::ostringstream m;
     m << "image_scale * coarse_scale = " << image_scale * coarse_scale << " is below " << kMinImageScale;

@@ -16,6 +16,7 @@ TEST(PlannedEvaluations, RunsTimesIterationsLessWhatHalvingDrops) {
   o.explore_tolerance = 0;  // no shape scan
   o.successive_halving = false;
   o.probe_distance = 0;  // no curvature probe
+  o.polish_iterations = 0;
   EXPECT_EQ(planned_evaluations(o), 16 * 101 + 2);
   o.successive_halving = true;  // 25 iterations each at 16, 8, 4, 2 runs, then the last evaluation at 2
   EXPECT_EQ(planned_evaluations(o), 16 * 25 + 8 * 25 + 4 * 25 + 2 * 25 + 2 + 2);

@@ -61,7 +61,10 @@ TEST(Refiner, RecoversHardPerturbation) {
   EXPECT_EQ(r.run_losses.size(), 16u);
   EXPECT_EQ(r.history.size(), 61u);
   EXPECT_EQ(r.iterations, 60);
-  EXPECT_DOUBLE_EQ(r.loss.total, *std::min_element(r.run_losses.begin(), r.run_losses.end()));
+  // The winner's loss, or lower: the polish goes on from it.
+  EXPECT_LE(r.loss.total, *std::min_element(r.run_losses.begin(), r.run_losses.end()));
+  EXPECT_GT(r.polish_iterations, 0);
+  EXPECT_LE(r.polish_iterations, 30);
 }
 
 // Coarse to fine (the default) recovers what a single scale recovers; the reported losses are at the fine scale
@@ -113,6 +116,7 @@ TEST(Refiner, SuccessiveHalvingDropsTheWorseHalfThreeTimes) {
   o.iterations = 20;
   o.coarse_fraction = 0;
   o.explore_tolerance = 0;  // (the L-block has no shape turns anyway; planned_evaluations would count them)
+  o.polish_iterations = 0;  // (run_histories do not hold the polish's; counted below)
   const RefineResult r = Refiner(o).refine(s.cam, s.obs, s.mesh, init);
   std::map<size_t, int> runs_by_length;
   for (const auto& h : r.run_histories) ++runs_by_length[h.size()];
@@ -134,13 +138,17 @@ TEST(Refiner, SuccessiveHalvingDropsTheWorseHalfThreeTimes) {
   o.successive_halving = true;
   o.coarse_fraction = 0.5;
   EXPECT_EQ(evaluated(Refiner(o).refine(s.cam, s.obs, s.mesh, init)) + 2, planned_evaluations(o));
-  // With the shape scan: the 4 runs active when the fine phase begins, each with itself and up to
-  // kMaxShapeTurns turns.
+  // With the shape scan at k = 10 of 20: the 4 runs active then, each with itself and up to kMaxShapeTurns
+  // turns, and a candidate run to the end (11 iterations); the candidate's and the basin's print
+  // registrations; the print alignment's, about one axis, and the loss and registration at its turn.
   RefinerOptions scan = o;
   scan.explore_tolerance = 0.01;
-  // (and the print alignment's, about one axis, and the loss at its turn)
-  EXPECT_EQ(planned_evaluations(scan),
-            planned_evaluations(o) + 4 * (1 + kMaxShapeTurns) + print_alignment_evaluations(scan.print_search) + 1);
+  EXPECT_EQ(planned_evaluations(scan), planned_evaluations(o) + 4 * (1 + kMaxShapeTurns) + 11 + 2 +
+                                           print_alignment_evaluations(scan.print_search) + 2);
+  // The polish: its runs, each iteration and a last evaluation (at most: it stops once converged).
+  RefinerOptions polished = o;
+  polished.polish_iterations = 30;
+  EXPECT_EQ(planned_evaluations(polished), planned_evaluations(o) + polished.polish_runs * 31);
 }
 
 TEST(Refiner, SeveralStartsTheBetterOneWins) {
