@@ -53,9 +53,12 @@ struct RefinerOptions {
   /// axes that move the surface by at most this fraction of its diameter (a bottle about its axis: every 30
   /// degrees; a box: its half turns) give poses that silhouette and depth cannot tell apart, and gradient
   /// descent does not cross between them (a print's basin is a few pixels wide). When the fine phase begins
-  /// (silhouette and depth have done their work), every run is evaluated turned by each of them and goes on
-  /// from whichever has the lowest loss, if lower than its own by more than 1 % (a scan: forward renders only,
-  /// no step). 0 = off (the paper's algorithm).
+  /// (silhouette and depth have done their work), every run is evaluated turned by each of them (a scan: forward
+  /// renders only, no step); of the turns whose loss is more than 1 % below some run's own, the lowest becomes a
+  /// candidate run beside the others, which go on unturned. Once converged, the candidate replaces the start's
+  /// basin only when the evidence is clear for how far it jumps (jump_is_supported() in refine_run.hpp: a lower
+  /// loss, the print's registration not falling, and either clearly better print or a loss lower by a margin
+  /// that grows with the angle). 0 = off (the paper's algorithm).
   double explore_tolerance = 0.01;  // [0, 0.2]
   /// Weight of the texture term (loss.weight_texture) added to the loss the scan compares turns with. Off by
   /// default: it settles ties on easy starts but misjudges hard ones, whose print is still a few pixels off
@@ -145,7 +148,8 @@ struct RefinerOptions {
 struct RefineResult {
   Pose pose;                          // refined model pose in the camera frame (metres)
   Pose initial_pose;                  // the initial pose the winning run started from
-  LossValue loss;                     // winner's final loss, per term (unweighted means) and total
+  LossValue loss;                     // the result's loss, per term (unweighted means) and total: the winner's
+                                      // best, or lower after the polish
   /// The loss as used: RefinerOptions::loss with the refiner's own choices, a term without its observation at
   /// weight 0 (no mask: weight_mask; no depth: weight_depth; no rgb: weight_rgb and weight_edges) and a plain
   /// model's colour term off (RefinerOptions::plain_model_rgb).
@@ -158,13 +162,14 @@ struct RefineResult {
   std::vector<double> learning_rates; // every run's drawn rate
   std::vector<Pose> run_poses;        // every run's best pose (its start for runs dropped in the coarse phase)
   std::vector<double> history;        // winner's loss at every iteration (the coarse phase's at its own scale)
-  std::vector<std::vector<double>> run_histories;  // every run's loss at every iteration it ran
+  /// Every run's loss at every iteration it ran; a candidate's is NaN before the shape scan.
+  std::vector<std::vector<double>> run_histories;
   int winner = -1;                    // the run whose best pose is the result (its start's run when no run's
                                       // fine-phase best beat the start itself)
   int start = 0;                      // index of the initial pose the winning run started from
   int scan_turns = 0;                 // candidates the shape scan (explore_tolerance) added: runs from turned poses
-  bool scan_taken = false;            // the result is such a candidate, not the start's own basin (its print
-                                      // registered clearly better: see RefinerOptions::explore_tolerance)
+  bool scan_taken = false;            // the result is such a candidate, not the start's own basin (the evidence
+                                      // was clear: jump_is_supported() in src/core/refine_run.hpp)
   double print_turn = 0;              // radians the print alignment (print_search) turned the result by (0: none);
                                       // `loss` is then at the turned pose, up to kPrintLossTolerance (2 %)
                                       // above the winning run's best (and so, rarely, above initial_loss)
@@ -305,7 +310,8 @@ class Refiner {
 
 /// Hypothesis evaluations (one render + loss + gradient of one pose) that refining one object with `o` costs at
 /// most: the runs of every iteration, less those successive halving drops, the shape scan as for a shape with
-/// the most turns (kMaxShapeTurns; an asymmetric one has none) and the final scoring. An early stop only
+/// the most turns (kMaxShapeTurns; an asymmetric one has none) and its candidate run, the polish, the print
+/// alignment and the final scoring. An early stop (of the descent or the polish) only
 /// lowers it; a retry of a rejected result (retry_turn) doubles it for that object. The unit of
 /// RefineTimeEstimator (refine_time.hpp).
 long planned_evaluations(const RefinerOptions& o);

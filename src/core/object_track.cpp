@@ -138,6 +138,7 @@ RefinerOptions tracked_options(const RefinerOptions& o, const TrackOptions& t) {
   // A cap, never a raise: a user who lowers the refiner's own budget lowers the tracked one with it.
   if (t.batch_size > 0) out.batch_size = std::min(o.batch_size, t.batch_size);
   if (t.iterations > 0) out.iterations = std::min(o.iterations, t.iterations);
+  out.polish_iterations = 0;  // a tracked start is not polished (Refiner::refine_all): not in its time budget
   out.validate();
   return out;
 }

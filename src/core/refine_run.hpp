@@ -28,7 +28,8 @@ double jump_margin(double angle);
 /// print measured at both (and weighed: RefinerOptions::min_print_significance > 0): never when it contradicts
 /// the jump (kPrintContradiction); always when it registers at the candidate, and by that much more than at the
 /// basin, at least kClearPrint * (1 + angle / pi) standard deviations (half a turn needs twice the evidence of a
-/// small one). Otherwise the loss decides, lower by more than jump_margin(angle).
+/// small one). Otherwise the loss decides, lower by more than jump_margin(angle). A print measured at the basin
+/// but not at the candidate (it left the view, or no longer has contrast) is lost evidence: no jump.
 bool jump_is_supported(const JumpEvidence& from, const JumpEvidence& to, double angle, bool weigh_print);
 /// Whether the print's registration allows the print alignment's turn from a pose whose print significance is
 /// z_from to one whose is z_to: not lower by more than kPrintContradiction (the alignment's texture term found
@@ -73,8 +74,8 @@ class RefineRun {
   const std::vector<Pose>& batch();
   /// Gradients are needed except on the last iteration and in the shape scan (call after batch()).
   bool with_gradient() const { return !scanning_ && k_ < options_.iterations; }
-  /// Takes this iteration's values for batch(), keeps each run's best and steps the runs (after the scan: turns
-  /// each run to its best turned pose, without a step).
+  /// Takes this iteration's values for batch(), keeps each run's best and steps the runs (after the scan: adds
+  /// the candidate run, without a step).
   void absorb(const std::vector<LossValue>& values, const std::function<void(int, int, double)>& on_iteration);
   /// Evaluates `poses` in every view at this iteration's scale (`fine`: at the fine scale) and gives each pose
   /// the mean over the views (terms, total and gradient: the views share the camera frame the gradient is in).
@@ -126,8 +127,8 @@ class RefineRun {
   int k_ = 0, stale_ = 0;
   int steps_ = 0;  // iterations stepped (k_ jumps when the coarse phase stalls)
   int halvings_ = 0;  // successive halvings done (of three)
-  // The shape scan (RefinerOptions::explore_tolerance): once, when the fine phase begins. A run turns only to a
-  // pose whose loss is lower than its own by more than kScanMargin (relative).
+  // The shape scan (RefinerOptions::explore_tolerance): once, when the fine phase begins. A turned pose is a
+  // candidate only when its loss is lower than its run's own by more than kScanMargin (relative).
   static constexpr double kScanMargin = 0.01;
   std::vector<Pose> turns_;  // model-frame turns tried on every run
   std::vector<ShapeRotation> print_axes_;

@@ -519,7 +519,9 @@ void RefineRun::absorb(const std::vector<LossValue>& values, const std::function
       best_.push_back(LossValue());
       best_.back().total = std::numeric_limits<double>::infinity();
       res_.learning_rates.push_back(res_.learning_rates[size_t(source)]);
-      res_.run_histories.emplace_back();
+      // (NaN until the scan: its history lines up with the other runs' iterations)
+      res_.run_histories.emplace_back(res_.run_histories[size_t(source)].size(),
+                                      std::numeric_limits<double>::quiet_NaN());
       source_.push_back(source);
       jump_angle_.push_back(Eigen::AngleAxisd(turns_[t - 1].R).angle());
       active_.push_back(i);
@@ -590,6 +592,7 @@ double jump_margin(double angle) { return kJumpMargin * (1.0 + 4.0 * std::abs(an
 
 bool jump_is_supported(const JumpEvidence& from, const JumpEvidence& to, double angle, bool weigh_print) {
   if (!(to.loss < from.loss)) return false;
+  if (weigh_print && std::isfinite(from.print) && !std::isfinite(to.print)) return false;  // the print is lost
   const bool weighed = weigh_print && std::isfinite(from.print) && std::isfinite(to.print);
   if (weighed && to.print < from.print - kPrintContradiction) return false;
   const double need = kClearPrint * (1.0 + std::abs(angle) / M_PI);
@@ -612,7 +615,13 @@ void RefineRun::polish(Renderer& renderer, RefineResult& res) {
   std::vector<LossValue> v;
   int stale = 0;
   for (int k = 0; k <= iters; ++k) {
-    evaluate(renderer, poses, loss_, k < iters, v, true);
+    if (k == 0) {  // every run starts at the result: one evaluation gives them all their first gradient
+      evaluate(renderer, {res.pose}, loss_, true, v, true);
+      const LossValue first = v[0];
+      v.assign(poses.size(), first);
+    } else {
+      evaluate(renderer, poses, loss_, k < iters, v, true);
+    }
     const double decay = std::pow(o.lr_decay, double(k) / iters);
     const double before = res.loss.total;
     for (size_t j = 0; j < poses.size(); ++j)
@@ -670,25 +679,32 @@ RefineResult RefineRun::finish(Renderer& renderer) {
     }
   }
   // The result's print significance, measured once when needed (the candidate's check, the print turn's).
-  std::optional<double> z_result;
+  double z_result = 0;
+  bool z_known = false;
   const auto result_significance = [&] {
-    if (!z_result) z_result = print_significance(renderer, res.pose);
-    return *z_result;
+    if (!z_known) z_result = print_significance(renderer, res.pose), z_known = true;
+    return z_result;
   };
   // A shape-scan candidate replaces the start's basin only when, both converged, the evidence is clear enough
   // for how far it jumps (jump_is_supported): silhouette and depth barely tell such turns apart.
   const int candidate = lowest(B, runs);
-  if (candidate >= 0 && std::isfinite(res.loss.total) && res.run_losses[size_t(candidate)] < res.loss.total) {
+  if (candidate >= 0 && !std::isfinite(res.loss.total) && std::isfinite(res.run_losses[size_t(candidate)])) {
+    take(candidate);  // every run from the starts left the image: the candidate is all there is
+    res.scan_taken = true;
+  } else if (candidate >= 0 && std::isfinite(res.loss.total) &&
+             res.run_losses[size_t(candidate)] < res.loss.total) {
     const Pose& turned = best_pose_[size_t(candidate)];
     const JumpEvidence basin{res.loss.total, result_significance()};
     const JumpEvidence jump{res.run_losses[size_t(candidate)], print_significance(renderer, turned)};
     if (jump_is_supported(basin, jump, jump_angle_[size_t(candidate)], o.min_print_significance > 0)) {
       take(candidate);
       res.scan_taken = true;
-      z_result = jump.print;
+      z_result = jump.print, z_known = true;
     }
   }
+  const Pose before_polish = res.pose;
   polish(renderer, res);
+  if (!(res.pose.R == before_polish.R && res.pose.t == before_polish.t)) z_known = false;  // measured elsewhere
   const bool one_view = meshes_.size() == 1;
   const Mesh& mesh0 = *meshes_.front();
   // The turn may cost up to kPrintLossTolerance of loss only because a mask or depth holds every other degree of
@@ -926,7 +942,7 @@ long planned_evaluations(const RefinerOptions& o) {
   // curvature probe.
   const long candidate = scan_at >= 0 && scan_at < o.iterations ? 2 : 0;
   const long print = o.explore_tolerance > 0 ? print_alignment_evaluations(o.print_search) + 2 : 0;
-  const long polish = o.polish_iterations > 0 && o.iterations > 0 ? long(o.polish_runs) * (o.polish_iterations + 1) : 0;
+  const long polish = o.polish_iterations > 0 && o.iterations > 0 ? 1 + long(o.polish_runs) * o.polish_iterations : 0;
   return total + 2 + candidate + print + polish + (o.probe_distance > 0 ? kCurvatureProbeEvaluations : 0);
 }
 

@@ -361,6 +361,7 @@ TEST(JumpEvidence, AJumpNeedsALowerLossAndEvidenceThatGrowsWithItsAngle) {
   // does not jump, nor would any.
   EXPECT_FALSE(jump_is_supported({0.2525, 13.2}, {0.2475, 0.2}, half, weigh));
   EXPECT_FALSE(jump_is_supported({0.30, 5.0}, {0.10, 3.9}, half, weigh));
+  EXPECT_FALSE(jump_is_supported({0.30, 5.0}, {0.10, none}, half, weigh));  // the print is lost there
   // The print supports it clearly: a loss barely lower is enough. Half a turn needs twice the bar of a small one.
   EXPECT_TRUE(jump_is_supported({0.30, 0.5}, {0.299, 6.6}, 0.1, weigh));
   EXPECT_FALSE(jump_is_supported({0.30, 0.5}, {0.299, 5.5}, half, weigh));
