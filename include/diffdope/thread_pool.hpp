@@ -2,7 +2,7 @@
 // A small persistent thread pool with parallel_for. Work items are independent and write only their own
 // outputs, so results never depend on the number of threads or on scheduling. A refinement calls it a few
 // hundred times in a row with microseconds between calls: the threads spin for kSpin before they sleep, so a
-// call does not pay the kernel's wake-up of a sleeping thread (2-3 % of the fast preset's time, session 25).
+// call does not pay the kernel's wake-up of a sleeping thread (2-3 % of the fast preset's time).
 #include <atomic>
 #include <chrono>
 #include <condition_variable>

@@ -297,7 +297,7 @@ long input_count(const std::string& diagnostics, const std::string& name, const 
   return std::stol(diagnostics.substr(at + what.size() + 1));
 }
 
-// Issue 12: a malformed message whose partners never arrive does not reach the synchronizer's callback: it must
+// A malformed message whose partners never arrive does not reach the synchronizer's callback: it must
 // still be counted and reported with its reason.
 TEST(BadInput, MalformedMessagesThatNeverSynchronizeAreCountedAndReported) {
   Node& n = *node;

@@ -1,4 +1,4 @@
-// Hostile mesh and texture files (issue 12): a corpus the test writes itself of files that crashed assimp,
+// Hostile mesh and texture files: a corpus the test writes itself of files that crashed assimp,
 // made it read out of bounds or allocate gigabytes. Each must end in a clear error, with bounded memory, and the
 // test process (a node, in real life) keeps running. Also the child-process isolation itself: a crash, a
 // runaway allocation or a hang inside the import costs only an error.

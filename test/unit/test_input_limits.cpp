@@ -1,4 +1,4 @@
-// Hostile but legal-looking inputs (issue 12): every option finite and inside its range, YAML errors that name
+// Hostile but legal-looking inputs: every option finite and inside its range, YAML errors that name
 // the key, intrinsics and poses that leave nothing to refine, meshes that draw nothing. Each must be refused with
 // a message that says what is wrong, never run with NaN losses or for an unbounded time.
 #include <gtest/gtest.h>

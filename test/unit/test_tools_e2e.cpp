@@ -90,7 +90,7 @@ TEST(ToolsEndToEnd, EvalReportsMissingDatasetClearly) {
   EXPECT_EQ(run(std::string(DIFFDOPE_EVAL_EXE) + " --bop x > /dev/null 2>&1"), 2);  // usage error
 }
 
-// Issue 12: an evaluation that evaluated nothing, or scored a symmetric object without knowing it is, must not
+// An evaluation that evaluated nothing, or scored a symmetric object without knowing it is, must not
 // look like a success.
 TEST(ToolsEndToEnd, EvalFailsLoudlyWhenItCannotEvaluateEverything) {
   TempDir tmp;
