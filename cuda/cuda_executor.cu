@@ -1,10 +1,10 @@
-// The CUDA executor of the render pipeline (src/core/render_pipeline.hpp): each stage of
-// src/core/render_stages.hpp (thin functors around the DD_HOST_DEVICE maths of include/diffdope/kernels/) is one
+// The CUDA executor of the render pipeline (src/render/pipeline.hpp): each stage of
+// src/render/stages.hpp (thin functors around the DD_HOST_DEVICE maths of src/render/kernels/) is one
 // kernel launch over every hypothesis of every object of a call (grid.y = hypothesis); meshes and textures are
 // uploaded once per mesh, observed images once per frame (pinned staging), all on one stream; one small download
 // per call brings back the loss sums and gradients.
 //
-// Differences from the CPU executor (src/core/host_executor.cpp, the same stages on host threads): float
+// Differences from the CPU executor (src/render/host_executor.cpp, the same stages on host threads): float
 // summation order (per-pixel sums are reduced in parallel, a warp sum then a double atomic per warp, in no fixed
 // order) and the device's libm (log2f of the mip level may differ by an ulp). Compiled with --fmad=false, so
 // single arithmetic operations round as on the CPU. Equivalence tests: test/unit/test_executors.cpp.
@@ -16,7 +16,7 @@
 #include <string>
 #include <vector>
 
-#include "../src/core/render_pipeline.hpp"
+#include "render/pipeline.hpp"
 #include "diffdope/device.hpp"
 
 namespace diffdope {

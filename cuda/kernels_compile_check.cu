@@ -1,11 +1,11 @@
-// Compiles every shared DD_HOST_DEVICE function of include/diffdope/kernels/ as CUDA device code, one pixel or
+// Compiles every shared DD_HOST_DEVICE function of src/render/kernels/ as CUDA device code, one pixel or
 // vertex per thread, in the shape the CUDA backend will launch them. Nothing here is run yet (the CUDA backend
 // is its own issue); building it proves that the maths the CPU backend runs and tests stays device-compatible.
-#include "diffdope/kernels/edges.hpp"
-#include "diffdope/kernels/pixel_loss.hpp"
-#include "diffdope/kernels/shade.hpp"
-#include "diffdope/kernels/silhouette.hpp"
-#include "diffdope/kernels/vertex_stage.hpp"
+#include "render/kernels/edges.hpp"
+#include "render/kernels/pixel_loss.hpp"
+#include "render/kernels/shade.hpp"
+#include "render/kernels/silhouette.hpp"
+#include "render/kernels/vertex_stage.hpp"
 
 namespace diffdope {
 namespace cuda_check {

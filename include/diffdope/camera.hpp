@@ -6,8 +6,6 @@
 #include <vector>
 #include <string>
 
-#include "diffdope/kernels/projection.hpp"
-
 namespace diffdope {
 
 struct Camera {
@@ -40,11 +38,6 @@ struct Camera {
   static constexpr double kMinFocal = 0.1, kMaxFocal = 1e7;
   static constexpr int kMaxSize = 16384;
   bool valid() const;
-
-  Intrinsics intrinsics() const {
-    return {static_cast<float>(fx), static_cast<float>(fy), static_cast<float>(cx), static_cast<float>(cy),
-            width, height};
-  }
 };
 
 }  // namespace diffdope

@@ -6,9 +6,9 @@
 #include <string>
 #include <vector>
 
-#include "diffdope/kernels/mesh_view.hpp"
 #include "diffdope/pose.hpp"
 #include "diffdope/symmetry.hpp"
+#include "diffdope/vec.hpp"
 
 namespace diffdope {
 
@@ -119,9 +119,8 @@ class Mesh {
   /// copies (same content). Renderers key their uploads on it. 0 = never finalized.
   uint64_t content_id() const { return content_id_; }
 
-  /// Kernel view over host memory; valid while this mesh and `texture_storage` live and are not modified.
-  /// `lod` > 0: the triangles of lods()[lod - 1] over the same vertices and textures.
-  MeshView view(std::vector<TextureView>& texture_storage, int lod = 0) const;
+  /// Per triangle: its area in UV units (0 when untextured), for the texture's mip level.
+  const std::vector<float>& tri_uv_area() const { return tri_uv_area_; }
 
   /// Simplified surfaces, each about 1 / kLodStep of the triangles of the one before (a finer choice than halving:
   /// an object seen small then gets a level near the error it can afford) and with a larger error (empty for

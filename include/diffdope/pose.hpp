@@ -6,8 +6,6 @@
 #include <Eigen/Geometry>
 #include <array>
 
-#include "diffdope/kernels/projection.hpp"
-
 namespace diffdope {
 
 using Vector6d = Eigen::Matrix<double, 6, 1>;
@@ -41,8 +39,6 @@ struct Pose {
   bool is_valid(double tol = 1e-6) const;
   /// Projects R to the nearest rotation (keeps long optimisations from drifting off SO(3)).
   void orthonormalize();
-
-  RigidTransform to_kernel() const;
 };
 
 /// SE(3) exponential of delta = (rho, phi).

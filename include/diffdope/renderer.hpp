@@ -1,7 +1,7 @@
 #pragma once
 // The differentiable renderer: renders B hypotheses (poses) of one or several meshes and evaluates the loss
 // against an observation, with its gradient w.r.t. each pose's 6-D update. One pipeline
-// (src/core/render_pipeline.hpp) with two executors: CPU threads (make_cpu_renderer) and CUDA (device.hpp).
+// (src/render/pipeline.hpp) with two executors: CPU threads (make_cpu_renderer) and CUDA (device.hpp).
 #include <memory>
 #include <opencv2/core.hpp>
 #include <string>

@@ -9,7 +9,7 @@
 #include <filesystem>
 #include <fstream>
 
-#include "diffdope/option_range.hpp"
+#include "base/option_range.hpp"
 #include "diffdope_ros/conversions.hpp"
 
 namespace diffdope_ros {

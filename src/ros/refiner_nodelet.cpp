@@ -4,7 +4,7 @@
 #include "diffdope_ros/refiner_nodelet.hpp"
 #include "diffdope_ros/detection_selection.hpp"
 
-#include "diffdope/option_range.hpp"
+#include "base/option_range.hpp"
 
 #include <boost/bind/bind.hpp>
 #include <pluginlib/class_list_macros.hpp>

@@ -25,8 +25,8 @@
 #include <vector>
 
 #include "diffdope/mesh.hpp"
-#include "diffdope/thread_pool.hpp"
-#include "isolated_call.hpp"
+#include "base/thread_pool.hpp"
+#include "mesh/isolated_call.hpp"
 
 namespace fs = std::filesystem;
 using namespace diffdope;

@@ -12,7 +12,7 @@
 #include "diffdope/renderer.hpp"
 #include "diffdope/synthetic.hpp"
 #include "labelled_can.hpp"
-#include "refine_run.hpp"
+#include "refine/refine_run.hpp"
 
 using namespace diffdope;
 

@@ -14,10 +14,11 @@
 
 #include <Eigen/Geometry>
 
-#include "diffdope/kernels/vertex_stage.hpp"
+#include "render/kernels/vertex_stage.hpp"
 #include "diffdope/procedural.hpp"
-#include "render_stages.hpp"
-#include "simd_rows.hpp"
+#include "render/kernel_inputs.hpp"
+#include "render/stages.hpp"
+#include "render/simd_rows.hpp"
 
 namespace {
 using namespace diffdope;
@@ -109,7 +110,7 @@ struct ShadeScene {
 
   ShadeScene(bool uvs, std::mt19937& rng) : mesh(make_scan_like(ScanShape::Bottle, Eigen::Vector3d(0.07, 0.045, 0.19), 1500, 128, 3)) {
     std::uniform_real_distribution<float> u(0.f, 1.f);
-    M = mesh.view(textures);
+    M = make_mesh_view(mesh, textures);
     if (!uvs) M.uvs = nullptr;
     const int levels = textures.at(0).levels;
     const Eigen::Matrix3d R = Eigen::AngleAxisd(0.7, Eigen::Vector3d(0.3, 1.0, 0.2).normalized()).toRotationMatrix();
@@ -219,7 +220,7 @@ struct BlendScene {
       : mesh(make_scan_like(ScanShape::Bottle, Eigen::Vector3d(0.07, 0.045, 0.19), 1500, 128, 3)),
         K{focal, focal * 1.03f, 160.5f, 120.25f, 320, 240} {
     std::uniform_real_distribution<float> u(0.f, 1.f);
-    M = mesh.view(textures);
+    M = make_mesh_view(mesh, textures);
     const Eigen::Matrix3d R = Eigen::AngleAxisd(1.1, Eigen::Vector3d(0.3, 1.0, 0.2).normalized()).toRotationMatrix();
     float lx = 1e9f, hx = -1e9f, ly = 1e9f, hy = -1e9f;
     for (int i = 0; i < M.num_vertices; ++i) {

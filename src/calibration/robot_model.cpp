@@ -1,0 +1,194 @@
+// A robot from URDF (robot_model.hpp): urdfdom parses, we load the meshes and do the forward kinematics.
+#include "diffdope/robot_model.hpp"
+
+#include <urdf_parser/urdf_parser.h>
+
+#include <Eigen/Geometry>
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <functional>
+#include <sstream>
+#include <stdexcept>
+
+#include "diffdope/input_files.hpp"
+#include "diffdope/primitives.hpp"
+
+namespace diffdope {
+namespace {
+
+Pose to_pose(const urdf::Pose& p) {
+  double x, y, z, w;
+  p.rotation.getQuaternion(x, y, z, w);
+  return Pose::from_quaternion(x, y, z, w, Eigen::Vector3d(p.position.x, p.position.y, p.position.z));
+}
+
+}  // namespace
+
+RobotModel RobotModel::load_urdf(const std::string& path, const PackageResolver& resolve_package,
+                                 const MeshLoadOptions& mesh_options) {
+  const std::string dir = std::filesystem::absolute(path).parent_path().string();
+  return parse_urdf(read_text_file(path, "the URDF"), dir, path, resolve_package, mesh_options);
+}
+
+RobotModel RobotModel::parse_urdf(const std::string& xml, const std::string& base_dir, const std::string& origin,
+                                  const PackageResolver& resolve_package, const MeshLoadOptions& mesh_options) {
+  const urdf::ModelInterfaceSharedPtr urdf = urdf::parseURDF(xml);
+  if (!urdf || !urdf->getRoot()) throw std::runtime_error(origin + ": not a valid URDF (see urdfdom's message above)");
+  RobotModel model;
+  model.name_ = urdf->getName();
+  model.root_ = urdf->getRoot()->name;
+
+  std::map<std::string, std::shared_ptr<const Mesh>> loaded;  // by file and colour
+  const std::function<void(const urdf::LinkConstSharedPtr&)> walk = [&](const urdf::LinkConstSharedPtr& link) {
+    for (const urdf::VisualSharedPtr& v : link->visual_array) {
+      if (!v || !v->geometry) continue;
+      const std::string where = origin + ": link '" + link->name + "'";
+      Eigen::Vector3f colour = mesh_options.default_color;
+      if (v->material) colour = Eigen::Vector3f(v->material->color.r, v->material->color.g, v->material->color.b);
+      RobotVisual rv;
+      rv.link = link->name;
+      rv.link_from_visual = to_pose(v->origin);
+      std::ostringstream key;
+      key << colour.transpose() << " ";
+      std::function<Mesh()> make;
+      switch (v->geometry->type) {
+        case urdf::Geometry::MESH: {
+          const auto& m = static_cast<const urdf::Mesh&>(*v->geometry);
+          try {
+            rv.source = resolve_mesh_path(m.filename, base_dir, resolve_package);
+          } catch (const std::exception& e) {
+            throw std::runtime_error(where + ": mesh " + e.what());
+          }
+          rv.scale = Eigen::Vector3d(m.scale.x, m.scale.y, m.scale.z);
+          if (!rv.scale.allFinite() || rv.scale.cwiseAbs().minCoeff() <= 0)
+            throw std::runtime_error(where + ": mesh scale must be finite and non-zero");
+          key << rv.source;
+          make = [&, path = rv.source] {
+            MeshLoadOptions o = mesh_options;
+            o.default_color = colour;
+            return Mesh::load(path, o);
+          };
+          break;
+        }
+        case urdf::Geometry::BOX: {
+          const auto& b = static_cast<const urdf::Box&>(*v->geometry);
+          const Eigen::Vector3d size(b.dim.x, b.dim.y, b.dim.z);
+          if (!size.allFinite() || size.minCoeff() <= 0) throw std::runtime_error(where + ": box size must be positive");
+          std::ostringstream desc;
+          desc << "box " << size.transpose();
+          key << desc.str();
+          rv.source = desc.str();
+          make = [=] { return make_box(size, make_flat_texture(colour, "URDF material colour")); };
+          break;
+        }
+        case urdf::Geometry::CYLINDER: {
+          const auto& c = static_cast<const urdf::Cylinder&>(*v->geometry);
+          if (!(c.radius > 0) || !(c.length > 0)) throw std::runtime_error(where + ": cylinder size must be positive");
+          key << "cylinder " << c.radius << " " << c.length;
+          rv.source = "cylinder";
+          make = [=, r = c.radius, l = c.length] { return make_cylinder(r, l, 48, make_flat_texture(colour, "URDF material colour")); };
+          break;
+        }
+        case urdf::Geometry::SPHERE: {
+          const auto& s = static_cast<const urdf::Sphere&>(*v->geometry);
+          if (!(s.radius > 0)) throw std::runtime_error(where + ": sphere radius must be positive");
+          key << "sphere " << s.radius;
+          rv.source = "sphere";
+          make = [=, r = s.radius] { return make_uv_sphere(r, 16, 32, make_flat_texture(colour, "URDF material colour")); };
+          break;
+        }
+        default:
+          throw std::runtime_error(where + ": unknown visual geometry");
+      }
+      auto found = loaded.find(key.str());
+      if (found == loaded.end()) {
+        try {
+          found = loaded.emplace(key.str(), std::make_shared<const Mesh>(make())).first;
+        } catch (const std::exception& e) {
+          throw std::runtime_error(where + ": " + e.what());
+        }
+      }
+      rv.mesh = found->second;
+      model.visuals_.push_back(std::move(rv));
+    }
+    for (const urdf::JointSharedPtr& j : link->child_joints) {
+      Joint joint;
+      joint.name = j->name;
+      joint.parent = link->name;
+      joint.child = j->child_link_name;
+      joint.parent_from_origin = to_pose(j->parent_to_joint_origin_transform);
+      joint.axis = Eigen::Vector3d(j->axis.x, j->axis.y, j->axis.z);
+      const std::string where = origin + ": joint '" + j->name + "'";
+      switch (j->type) {
+        case urdf::Joint::FIXED: joint.type = Joint::Type::kFixed; break;
+        case urdf::Joint::REVOLUTE: joint.type = Joint::Type::kRevolute; break;
+        case urdf::Joint::CONTINUOUS: joint.type = Joint::Type::kContinuous; break;
+        case urdf::Joint::PRISMATIC: joint.type = Joint::Type::kPrismatic; break;
+        default:
+          throw std::runtime_error(where + ": floating and planar joints are not supported (a fixed-base robot is)");
+      }
+      if (joint.type != Joint::Type::kFixed) {
+        if (!joint.axis.allFinite() || joint.axis.norm() < 1e-9) throw std::runtime_error(where + ": zero axis");
+        joint.axis.normalize();
+      }
+      if (j->mimic) {
+        joint.mimic = j->mimic->joint_name;
+        joint.multiplier = j->mimic->multiplier;
+        joint.offset = j->mimic->offset;
+      }
+      model.joints_.push_back(joint);
+      walk(urdf->getLink(j->child_link_name));
+    }
+  };
+  walk(urdf->getRoot());
+  if (model.visuals_.empty()) throw std::runtime_error(origin + ": no link has a visual: nothing to render");
+  for (const Joint& j : model.joints_)
+    if (!j.mimic.empty()) {
+      bool found = false;
+      for (const Joint& k : model.joints_)
+        found = found || (k.name == j.mimic && k.mimic.empty() && k.type != Joint::Type::kFixed);
+      if (!found)
+        throw std::runtime_error(origin + ": joint '" + j.name + "' mimics '" + j.mimic +
+                                 "', which is not a movable joint of the model (or mimics another)");
+    }
+  return model;
+}
+
+std::vector<std::string> RobotModel::joint_names() const {
+  std::vector<std::string> out;
+  for (const Joint& j : joints_)
+    if (j.type != Joint::Type::kFixed && j.mimic.empty()) out.push_back(j.name);
+  return out;
+}
+
+double RobotModel::position_of(const Joint& j, const std::map<std::string, double>& positions) const {
+  const std::string& name = j.mimic.empty() ? j.name : j.mimic;
+  const auto it = positions.find(name);
+  if (it == positions.end()) throw std::invalid_argument("joint '" + name + "' has no position");
+  if (!std::isfinite(it->second)) throw std::invalid_argument("joint '" + name + "': position is not finite");
+  return j.mimic.empty() ? it->second : j.multiplier * it->second + j.offset;
+}
+
+std::map<std::string, Pose> RobotModel::link_poses(const std::map<std::string, double>& positions) const {
+  std::map<std::string, Pose> out;
+  out[root_] = Pose();
+  for (const Joint& j : joints_) {  // parents first
+    Pose motion;
+    if (j.type == Joint::Type::kRevolute || j.type == Joint::Type::kContinuous)
+      motion.R = Eigen::AngleAxisd(position_of(j, positions), j.axis).toRotationMatrix();
+    else if (j.type == Joint::Type::kPrismatic)
+      motion.t = position_of(j, positions) * j.axis;
+    out[j.child] = out.at(j.parent) * j.parent_from_origin * motion;
+  }
+  return out;
+}
+
+std::vector<MeshPart> RobotModel::posed_visuals(const std::map<std::string, double>& positions) const {
+  const std::map<std::string, Pose> links = link_poses(positions);
+  std::vector<MeshPart> parts;
+  for (const RobotVisual& v : visuals_) parts.push_back({v.mesh.get(), links.at(v.link) * v.link_from_visual, v.scale});
+  return parts;
+}
+
+}  // namespace diffdope
