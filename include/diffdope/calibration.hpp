@@ -30,7 +30,7 @@ struct CalibrationOptions {
   RefinerOptions refiner = default_refiner();
   /// Descents in a row, each from the one before's result ([1, 10]): the second polishes what the first's
   /// decayed rates left (generated arm, 10 cm / 20 degrees off: median 3.7 mm / 0.17 degrees of the camera's
-  /// position after one pass of 300 iterations, 0.3 mm / 0.02 degrees after two; README).
+  /// position after one pass of 300 iterations, 0.3 mm / 0.02 degrees after two; docs/calibration.md).
   int passes = 2;
   /// Without a mask, an observed pixel is the robot's when its depth lies within this many metres of the depth
   /// range the robot, rendered at the initial guess, shows within this distance (projected) around it. It must
@@ -39,7 +39,7 @@ struct CalibrationOptions {
   /// The refiner's defaults for a robot: no colour term (URDF meshes seldom carry the robot's real colours), no
   /// shape scan or curvature probe (they are for objects); 200 iterations; learning rates in [0.0002, 0.006]:
   /// a robot's links are thin for its size, so the mask term's slope per metre is that of a link's width, not
-  /// of the robot's diameter, and the objects' rates overshoot (measured: README).
+  /// of the robot's diameter, and the objects' rates overshoot (measured: docs/calibration.md).
   static RefinerOptions default_refiner();
   /// Throws std::invalid_argument naming the first value outside its range.
   void validate() const;

@@ -4,6 +4,7 @@
 // output), the node's dynamic_reconfigure mapping and the checks of cfg/Refiner.cfg are derived from it. The
 // defaults are the structs' own initialisers (Options{}), so they are written once too.
 #include <charconv>
+#include <cmath>
 #include <cstdint>
 #include <functional>
 #include <string>
@@ -55,8 +56,11 @@ struct OptionSpec {
       case OptionType::kString: return get<std::string>(o);
       case OptionType::kDouble: break;
     }
-    char buf[64];
-    const auto r = std::to_chars(buf, buf + sizeof(buf), get<double>(o));
+    char buf[400];
+    const double v = get<double>(o);
+    const bool plain = v == 0 || (std::abs(v) >= 1e-6 && std::abs(v) < 1e9);  // 0.0005 rather than 5e-04
+    const auto r = plain ? std::to_chars(buf, buf + sizeof(buf), v, std::chars_format::fixed)
+                         : std::to_chars(buf, buf + sizeof(buf), v);
     std::string s(buf, r.ptr);
     if (s.find_first_of(".en") == std::string::npos) s += ".0";  // a float in YAML's eyes
     return s;

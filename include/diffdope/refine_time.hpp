@@ -14,7 +14,7 @@ namespace diffdope {
 class RefineTimeEstimator {
  public:
   /// Cost of one object's evaluation before anything was timed, seconds: a scan-like object at the default
-  /// image scale on one core of a 2-core x86-64 VM (README, "ROS node"): deliberately on the slow side.
+  /// image scale on one core of a 2-core x86-64 VM (docs/benchmarks.md): deliberately on the slow side.
   static constexpr double kPriorSecondsPerEvaluation = 1e-3;
   /// How many recent refinements the estimate looks at (it follows a bigger object or a busier machine within
   /// a few refinements and forgets them after this many).

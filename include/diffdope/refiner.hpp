@@ -20,13 +20,14 @@
 
 namespace diffdope {
 
-/// Every field has a default and the same name as its YAML key (see config/default.yaml). validate() checks that
-/// every number is finite and inside the range given with it; ranges are generous (far beyond useful values)
-/// but bound the time and memory one refinement can take.
+/// Every field has a default and the same name as its YAML key (see config/default.yaml). Names, ranges, units and
+/// one-line docs are in one table (refiner_option_table(), option_table.hpp), from which the YAML reader,
+/// validate() and to_yaml() work; ranges are generous (far beyond useful values) but bound the time and memory
+/// one refinement can take.
 struct RefinerOptions {
   int batch_size = 32;   // B: parallel runs (paper: 32); [1, kMaxBatchSize]
   /// Gradient steps per run (paper: 100). 60 with the coarse-to-fine schedule below ends within 0.2 AUC of 100 on
-  /// the dev set at 55 % of the time (README figures).
+  /// the dev set at 55 % of the time (docs/benchmarks.md).
   int iterations = 60;  // [0, kMaxIterations]
   /// Learning-rate bounds, dimensionless. A step moves the object's centre by about lr * 2 * diameter * (loss
   /// slope) and turns it by about 4 * lr * (slope) radians: translation gradients are scaled by diameter^2 and
@@ -62,7 +63,7 @@ struct RefinerOptions {
   double explore_tolerance = 0.01;  // [0, 0.2]
   /// Weight of the texture term (loss.weight_texture) added to the loss the scan compares turns with. Off by
   /// default: it settles ties on easy starts but misjudges hard ones, whose print is still a few pixels off
-  /// when the scan comes (README figures).
+  /// when the scan comes (docs/benchmarks.md).
   double explore_texture_weight = 0.0;  // [0, LossOptions::kMaxWeight]
   /// Print alignment (print_alignment.hpp): after the descent, the result is turned about each axis of near
   /// revolution of its shape (within explore_tolerance: a bottle's axis, or a mug's body axis, which the handle
@@ -82,8 +83,8 @@ struct RefinerOptions {
   /// Polish: after the descent and the shape scan's choice, before the print alignment, polish_runs runs go on
   /// from the chosen pose for polish_iterations more steps at image_scale, at small rates (lr_low, doubling
   /// per run, decayed as the descent's), and the lowest loss seen is kept. The descent's winners from hard
-  /// starts are mostly large-rate runs still hopping 1-3 mm about the minimum when the iterations end (README
-  /// figures). 0 = off (the paper's algorithm); never for tracked starts (ObjectTarget::explore false) nor with
+  /// starts are mostly large-rate runs still hopping 1-3 mm about the minimum when the iterations end
+  /// (docs/benchmarks.md). 0 = off (the paper's algorithm); never for tracked starts (ObjectTarget::explore false) nor with
   /// iterations 0 (scoring the start).
   int polish_iterations = 30;  // [0, kMaxIterations]
   int polish_runs = 4;         // [1, 16]
@@ -99,7 +100,7 @@ struct RefinerOptions {
   int early_stop_patience = 0;          // [0, kMaxIterations]
   double early_stop_tolerance = 1e-4;   // [0, 1]
   /// Speed: at 25 %, 50 % and 75 % of the iterations keep only the better half of the runs (by their best loss
-  /// so far). Less than half the work; the winner almost never comes from a dropped half (see README's figures).
+  /// so far). Less than half the work; the winner almost never comes from a dropped half (docs/benchmarks.md).
   /// false = the paper's algorithm exactly (every run goes to the end).
   bool successive_halving = true;
   /// Without an observed mask, the loss looks at the initial pose's projected bounding box grown by this
@@ -125,7 +126,7 @@ struct RefinerOptions {
   RenderOptions render;  // back-face culling, near plane, threads
   /// Backend: cpu, cuda (an error without a device) or auto (CUDA when a device is present, else the CPU with
   /// one line on stderr). Default cpu: the CUDA backend shares the CPU's maths but has not yet been run on a
-  /// GPU by this project (README, "CUDA backend").
+  /// GPU by this project (docs/design.md, "CUDA backend").
   std::string device = "cpu";
 
   /// Overrides fields present in a YAML file / string; unknown keys are an error (typos must not pass
@@ -136,6 +137,9 @@ struct RefinerOptions {
   static RefinerOptions from_yaml_string(const std::string& yaml, const std::string& origin = "<string>");
   static RefinerOptions from_yaml_string(const std::string& yaml, const RefinerOptions& base,
                                          const std::string& origin);
+  /// Every option as YAML with a comment and range per key, in the table's order (option_table.hpp);
+  /// from_yaml_string() reads it back to the same values. config/default.yaml is RefinerOptions().to_yaml().
+  std::string to_yaml() const;
   static constexpr int kMaxBatchSize = 1024;
   static constexpr int kMaxIterations = 10000;
   static constexpr double kMinImageScale = 0.02;

@@ -56,7 +56,7 @@ struct LossOptions {
   double weight_rgb = 1.0;
   double weight_depth = 1.0;
   double weight_mask = 1.0;
-  double weight_edges = 0.0;      // off unless asked for (see the README's figures)
+  double weight_edges = 0.0;      // off unless asked for (docs/benchmarks.md)
   double edge_scale = 0.4;        // Sobel magnitude at which E_render = 0.5 (about a grey step of 0.1)
   /// Texture under real lighting: inside the object (observed mask eroded by a pixel, render fully covered),
   /// |Sobel(log(grey_obs + eps)) - Sobel(log(grey_render + eps))| summed over x and y. A log image's gradient

@@ -8,7 +8,7 @@
 //   - services (own queue and thread: computing takes seconds, the inputs keep flowing): ~take_sample,
 //     ~remove_sample, ~compute, ~save;
 //   - outputs: the static TF robot base -> camera after ~compute (~publish_tf), the YAML (~output_file).
-// Parameters and topics: README.md ("Calibration node").
+// Parameters and topics: docs/ros.md.
 #include <nodelet/nodelet.h>
 #include <ros/callback_queue.h>
 #include <ros/ros.h>

@@ -5,7 +5,7 @@
 //   - a worker thread runs every refinement (streaming frames and service requests), so callbacks, the
 //     service and TF never wait on each other;
 //   - outputs: TF, per-object PoseStamped, RefinedPoseArray with scores, overlay image, markers, diagnostics.
-// Parameters and topics: README.md ("ROS node").
+// Parameters and topics: docs/ros.md.
 #include <cv_bridge/cv_bridge.h>
 #include <diagnostic_updater/diagnostic_updater.h>
 #include <dynamic_reconfigure/server.h>

@@ -1,14 +1,17 @@
-// RefinerOptions from YAML (the same keys as the struct's fields; see config/default.yaml).
+// RefinerOptions' rows of the option table, and what is derived from them: the YAML reader, the checks and
+// to_yaml() (config/default.yaml).
 #include <yaml-cpp/yaml.h>
 
+#include <algorithm>
 #include <cmath>
+#include <map>
 #include <set>
 #include <sstream>
 #include <type_traits>
 #include <stdexcept>
 
-#include "diffdope/object_track.hpp"
 #include "base/option_range.hpp"
+#include "diffdope/option_table.hpp"
 #include "diffdope/refiner.hpp"
 
 namespace diffdope {
@@ -42,64 +45,35 @@ void reject_unknown(const YAML::Node& node, const std::set<std::string>& used, c
   }
 }
 
+/// Reads the value of `row` from `node[row.key()]` when present.
+void read_row(const YAML::Node& node, const OptionSpec<RefinerOptions>& row, RefinerOptions& o,
+              std::set<std::string>& used) {
+  const std::string key = row.key();
+  switch (row.type) {
+    case OptionType::kBool: return read(node, key.c_str(), row.get<bool>(o), used);
+    case OptionType::kInt: return read(node, key.c_str(), row.get<int>(o), used);
+    case OptionType::kDouble: return read(node, key.c_str(), row.get<double>(o), used);
+    case OptionType::kUnsigned: return read(node, key.c_str(), row.get<uint64_t>(o), used);
+    case OptionType::kString: return read(node, key.c_str(), row.get<std::string>(o), used);
+  }
+}
+
 RefinerOptions parse(const YAML::Node& root, RefinerOptions o, const std::string& origin) {
   if (!root || root.IsNull()) return o;
   if (!root.IsMap()) throw std::runtime_error(origin + ": expected a mapping of option names to values");
   std::set<std::string> used;
+  std::map<std::string, std::set<std::string>> section_used;
   try {
-    read(root, "batch_size", o.batch_size, used);
-    read(root, "iterations", o.iterations, used);
-    read(root, "lr_low", o.lr_low, used);
-    read(root, "lr_high", o.lr_high, used);
-    read(root, "lr_log_uniform", o.lr_log_uniform, used);
-    read(root, "lr_decay", o.lr_decay, used);
-    read(root, "image_scale", o.image_scale, used);
-    read(root, "coarse_fraction", o.coarse_fraction, used);
-    read(root, "coarse_scale", o.coarse_scale, used);
-    read(root, "explore_tolerance", o.explore_tolerance, used);
-    read(root, "explore_texture_weight", o.explore_texture_weight, used);
-    read(root, "print_search", o.print_search, used);
-    read(root, "retry_turn", o.retry_turn, used);
-    read(root, "seed", o.seed, used);
-    read(root, "successive_halving", o.successive_halving, used);
-    read(root, "early_stop_patience", o.early_stop_patience, used);
-    read(root, "early_stop_tolerance", o.early_stop_tolerance, used);
-    read(root, "no_mask_window", o.no_mask_window, used);
-    read(root, "inlier_threshold", o.inlier_threshold, used);
-    read(root, "min_mask_iou", o.min_mask_iou, used);
-    read(root, "min_depth_inliers", o.min_depth_inliers, used);
-    read(root, "min_print_significance", o.min_print_significance, used);
-    read(root, "probe_distance", o.probe_distance, used);
-    read(root, "plain_model_rgb", o.plain_model_rgb, used);
-    read(root, "polish_iterations", o.polish_iterations, used);
-    read(root, "polish_runs", o.polish_runs, used);
-    read(root, "device", o.device, used);
-    used.insert("loss");
-    if (const YAML::Node l = root["loss"]) {
-      std::set<std::string> lu;
-      read(l, "weight_rgb", o.loss.weight_rgb, lu);
-      read(l, "weight_depth", o.loss.weight_depth, lu);
-      read(l, "weight_mask", o.loss.weight_mask, lu);
-      read(l, "weight_edges", o.loss.weight_edges, lu);
-      read(l, "edge_scale", o.loss.edge_scale, lu);
-      read(l, "weight_texture", o.loss.weight_texture, lu);
-      read(l, "texture_epsilon", o.loss.texture_epsilon, lu);
-      read(l, "rgb_miss", o.loss.rgb_miss, lu);
-      read(l, "depth_truncation", o.loss.depth_truncation, lu);
-      read(l, "occlusion_margin", o.loss.occlusion_margin, lu);
-      reject_unknown(l, lu, origin + " (loss)");
+    for (const OptionSpec<RefinerOptions>& row : refiner_option_table()) {
+      const std::string section = row.section();
+      if (section.empty()) {
+        read_row(root, row, o, used);
+        continue;
+      }
+      used.insert(section);
+      if (const YAML::Node node = root[section]) read_row(node, row, o, section_used[section]);
     }
-    used.insert("render");
-    if (const YAML::Node r = root["render"]) {
-      std::set<std::string> ru;
-      read(r, "cull_back_faces", o.render.cull_back_faces, ru);
-      read(r, "auto_cull_closed", o.render.auto_cull_closed, ru);
-      read(r, "near_plane", o.render.near_plane, ru);
-      read(r, "roi_margin", o.render.roi_margin, ru);
-      read(r, "lod_pixel_error", o.render.lod_pixel_error, ru);
-      read(r, "threads", o.render.threads, ru);
-      reject_unknown(r, ru, origin + " (render)");
-    }
+    for (const auto& [section, keys] : section_used) reject_unknown(root[section], keys, origin + " (" + section + ")");
   } catch (const YAML::Exception& e) {
     throw std::runtime_error(origin + ": " + e.what());
   } catch (const std::invalid_argument& e) {
@@ -150,39 +124,95 @@ RefinerOptions RefinerOptions::from_yaml_string(const std::string& yaml, const s
 
 
 
-// Every number must be finite and inside its documented range (include/diffdope/refiner.hpp), so a typo cannot
-// turn into NaN losses or an endless refinement.
+const std::vector<OptionSpec<RefinerOptions>>& refiner_option_table() {
+  using O = RefinerOptions;
+  static const std::vector<OptionSpec<O>> rows = [] {
+    std::vector<OptionSpec<O>> r = {
+        option_row("batch_size", &O::batch_size, 1, O::kMaxBatchSize, "", "B parallel runs, each with its own learning rate"),
+        option_row("iterations", &O::iterations, 0, O::kMaxIterations, "", "gradient steps per run (paper: 100; config/paper.yaml)"),
+        option_row("lr_low", &O::lr_low, 0, 10, "", "lowest learning rate drawn (dimensionless, see refiner.hpp)", true),
+        option_row("lr_high", &O::lr_high, 0, 10, "", "highest learning rate drawn, >= lr_low", true),
+        option_row("lr_log_uniform", &O::lr_log_uniform, 0, 0, "", "true: draw rates log-uniformly (the paper's \"exponent\" variant)"),
+        option_row("lr_decay", &O::lr_decay, 0, 1, "", "rate multiplier reached at the last iteration", true),
+        option_row("image_scale", &O::image_scale, O::kMinImageScale, 4, "", "refine on images resized by this factor"),
+        option_row("coarse_fraction", &O::coarse_fraction, 0, 1, "",
+                   "share of the iterations on images resized by a further coarse_scale (0: the paper's single scale)",
+                   false, true),
+        option_row("coarse_scale", &O::coarse_scale, 0.05, 1, "", "the coarse phase's further resize factor"),
+        option_row("explore_tolerance", &O::explore_tolerance, 0, 0.2, " (0: off)",
+                   "shape scan: turns moving the surface less than this share of its diameter are tried as candidates"),
+        option_row("explore_texture_weight", &O::explore_texture_weight, 0, LossOptions::kMaxWeight, "",
+                   "texture term added to the shape scan's comparison"),
+        option_row("print_search", &O::print_search, 0, M_PI, " radians (0: off)",
+                   "print alignment: turn about an axis of near revolution to where the print fits best"),
+        option_row("retry_turn", &O::retry_turn, 0, M_PI, " radians (0: off)",
+                   "a rejected result is refined again from starts turned by this about the principal axes"),
+        option_row("polish_iterations", &O::polish_iterations, 0, O::kMaxIterations, " (0: off)",
+                   "after the descent, polish_runs runs go on from the result at small rates"),
+        option_row("polish_runs", &O::polish_runs, 1, 16, "", "runs of the polish, at lr_low doubling per run"),
+        option_row("seed", &O::seed, 0, 0, "", "learning-rate draws: same seed, same inputs, same result"),
+        option_row("successive_halving", &O::successive_halving, 0, 0, "",
+                   "keep the better half of the runs at 25, 50 and 75 % of the iterations (false: the paper's algorithm)"),
+        option_row("early_stop_patience", &O::early_stop_patience, 0, O::kMaxIterations, " iterations (0: off)",
+                   "stop when no run improved by early_stop_tolerance for this many iterations"),
+        option_row("early_stop_tolerance", &O::early_stop_tolerance, 0, 1, "", "relative loss improvement that counts"),
+        option_row("no_mask_window", &O::no_mask_window, 0, 10, "",
+                   "without a mask: window around the initial projected box, as a fraction of its size"),
+        option_row("inlier_threshold", &O::inlier_threshold, 0, 10, " metres",
+                   "a depth reading this near the render is an inlier (verdict, scores)", true),
+        option_row("min_mask_iou", &O::min_mask_iou, 0, 1, "", "verdict: plausible needs at least this mask IoU"),
+        option_row("min_depth_inliers", &O::min_depth_inliers, 0, 1, "",
+                   "verdict: plausible needs at least this fraction of depth inliers"),
+        option_row("min_print_significance", &O::min_print_significance, 0, 100, " (0: not weighed)",
+                   "verdict: the print lines up at least this many standard deviations above chance"),
+        option_row("probe_distance", &O::probe_distance, 0, 1, " metres (0: off)",
+                   "the loss is probed around the result at this surface displacement (curvature, covariance)"),
+        option_row("device", &O::device, 0, 0, "", "cpu, cuda (an error without a GPU) or auto (CUDA when present)"),
+        option_row("plain_model_rgb", &O::plain_model_rgb, 0, 0, "",
+                   "true: a model without print (one colour) still gets the colour term"),
+    };
+    r[r.size() - 2].choices = {"cpu", "cuda", "auto"};
+    append_section(r, loss_option_table(), "loss", &O::loss);
+    append_section(r, render_option_table(), "render", &O::render);
+    return r;
+  }();
+  return rows;
+}
+
+std::string RefinerOptions::to_yaml() const {
+  std::ostringstream out;
+  out << "# RefinerOptions (include/diffdope/refiner.hpp): every key is optional, unknown keys are rejected.\n"
+         "# Units: metres, radians; the range of each value follows its comment.\n";
+  std::string section;
+  for (const OptionSpec<RefinerOptions>& row : refiner_option_table()) {
+    if (row.section() != section) {
+      section = row.section();
+      out << section << ":\n";
+    }
+    std::string line = (section.empty() ? "" : "  ") + row.key() + ": " + row.text(*this);
+    line.resize(std::max<size_t>(line.size() + 1, 28), ' ');
+    std::string range;
+    if (row.type == OptionType::kInt || row.type == OptionType::kDouble) {
+      std::ostringstream r;
+      r << (row.lo_open ? "(" : "[") << row.lo << ", " << row.hi << (row.hi_open ? ")" : "]") << row.unit;
+      range = "; " + r.str();
+    }
+    out << line << "# " << row.doc << range << "\n";
+  }
+  return out.str();
+}
+
+// Every number must be finite and inside its range (the table above), so a typo cannot turn into NaN losses or an
+// endless refinement.
 void RefinerOptions::validate() const {
   const OptionRange check{"refiner options"};
-  check("batch_size", batch_size, 1, kMaxBatchSize);
-  check("iterations", iterations, 0, kMaxIterations);
-  check.above("lr_low", lr_low, 0, 10);
-  check.above("lr_high", lr_high, 0, 10);
+  check_option_ranges(refiner_option_table(), *this, check);
   if (lr_high < lr_low) check.fail("lr_high must be >= lr_low");
-  check.above("lr_decay", lr_decay, 0, 1);
-  check("image_scale", image_scale, kMinImageScale, 4);
-  if (!(coarse_fraction >= 0 && coarse_fraction < 1)) check.fail("coarse_fraction must be in [0, 1)");
-  check("coarse_scale", coarse_scale, 0.05, 1);
-  check("explore_tolerance", explore_tolerance, 0, 0.2);
-  check("explore_texture_weight", explore_texture_weight, 0, LossOptions::kMaxWeight);
-  check("print_search", print_search, 0, M_PI);
-  check("retry_turn", retry_turn, 0, M_PI);
-  check("polish_iterations", polish_iterations, 0, kMaxIterations, " (0: off)");
-  check("polish_runs", polish_runs, 1, 16);
   if (coarse_fraction > 0 && image_scale * coarse_scale < kMinImageScale) {
     std::ostringstream m;
     m << "image_scale * coarse_scale = " << image_scale * coarse_scale << " is below " << kMinImageScale;
     check.fail(m.str());
   }
-  check("early_stop_patience", early_stop_patience, 0, kMaxIterations, " iterations (0: off)");
-  check("early_stop_tolerance", early_stop_tolerance, 0, 1);
-  check("no_mask_window", no_mask_window, 0, 10);
-  check.above("inlier_threshold", inlier_threshold, 0, 10, " metres");
-  check("min_mask_iou", min_mask_iou, 0, 1);
-  check("min_depth_inliers", min_depth_inliers, 0, 1);
-  check("min_print_significance", min_print_significance, 0, 100);
-  check("probe_distance", probe_distance, 0, 1, " metres");
-  if (device != "cpu" && device != "cuda" && device != "auto") check.fail("device must be auto, cpu or cuda");
   loss.validate();
   render.validate();
 }

@@ -2,7 +2,7 @@
 // compiles this file once per target). Built without FMA contraction (CMakeLists.txt), so each lane computes what
 // the one-pixel kernels compute, bit for bit.
 // Not SVE: its vectors are sizeless types, which the lane kernels cannot keep in arrays and structs (V c[3]). On
-// aarch64 the rows run on NEON (checked by cross-compiling this file, see the README).
+// aarch64 the rows run on NEON (checked by cross-compiling this file, see docs/design.md).
 #ifndef HWY_DISABLED_TARGETS
 #define HWY_DISABLED_TARGETS (HWY_SVE | HWY_SVE2 | HWY_SVE_256 | HWY_SVE2_128)
 #endif

@@ -83,7 +83,7 @@ struct RasterBatch {
 /// their bounds into x0 .. y1 (room for end - first each); returns how many it left.
 int raster_batch(const RasterBatch& b, int* t, int* x0, int* x1, int* y0, int* y1, int* rest);
 
-/// The instruction set the rows run on here (e.g. "AVX3", "AVX2", "SSE4"; for the profile and the README).
+/// The instruction set the rows run on here (e.g. "AVX3", "AVX2", "SSE4"; for the profile and docs/benchmarks.md).
 const char* simd_row_target();
 
 }  // namespace diffdope

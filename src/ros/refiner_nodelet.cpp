@@ -1,6 +1,6 @@
 // RefinerNodelet set-up, parameters, input callbacks, the service hand-over, the sync watchdog and diagnostics.
 // The worker (refinement and publishing): refiner_worker.cpp; overlay and markers: refiner_visualization.cpp.
-// Parameters and topics: README.md ("ROS node").
+// Parameters and topics: docs/ros.md.
 #include "diffdope_ros/refiner_nodelet.hpp"
 #include "diffdope_ros/detection_selection.hpp"
 

@@ -52,7 +52,7 @@ const char* kUsage =
     "  --camera FILE          intrinsics (.json / .yaml, as diffdope_refine), the depth images' size\n"
     "  --init FILE            initial guess of the camera's pose in the robot base frame (base -> camera optical\n"
     "                         frame, metres), JSON: {\"R\": [9], \"t\": [3]}, {\"quaternion\": [x,y,z,w], \"t\": [3]}\n"
-    "                         or {\"matrix\": [16]}; 5 cm / 10 deg off is fine, see the README for more\n"
+    "                         or {\"matrix\": [16]}; 5 cm / 10 deg off is fine, see docs/calibration.md for more\n"
     "  --out DIR              output folder (created)\n"
     "  --package-path N=DIR   resolve package://N/... to DIR/... (repeatable; else ROS_PACKAGE_PATH is searched)\n"
     "  --depth-scale M        metres per depth unit (default 0.001)\n"

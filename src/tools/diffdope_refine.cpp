@@ -38,6 +38,7 @@ const char* kUsage =
     "usage: diffdope_refine --rgb FILE --camera FILE --mesh FILE --init FILE --out DIR\n"
     "                       [--depth FILE] [--depth-scale M] [--mask FILE] [--mesh-scale S] [--config FILE]\n"
     "                       [--device auto|cpu|cuda] [--quiet]\n"
+    "       diffdope_refine --print-config [--config FILE] [--device D]\n"
     "\n"
     "  --rgb FILE        colour or grey image (8/16-bit, anything OpenCV reads)\n"
     "  --camera FILE     intrinsics of the (rectified) image, .json or .yaml/.yml: fx, fy, cx, cy[, width, height],\n"
@@ -52,7 +53,9 @@ const char* kUsage =
     "  --mesh-scale S    metres per model unit (default 1; 0.001 for millimetre models such as BOP's)\n"
     "  --config FILE     refiner options YAML (see config/default.yaml)\n"
     "  --device D        backend: cpu, cuda (error without a GPU) or auto (CUDA if present); overrides --config\n"
-    "  --quiet           no progress bar and no summary on stdout\n";
+    "  --quiet           no progress bar and no summary on stdout\n"
+    "  --print-config    print the options in effect (the defaults, with --config's and --device's changes) as\n"
+    "                    YAML, every key with its range and meaning, and exit\n";
 
 /// The initial pose must put the object in front of the camera and (at least partly) in the image.
 void check_init_in_view(const std::string& path, const Pose& pose, const Mesh& mesh, const std::string& mesh_path,
@@ -238,6 +241,7 @@ struct Args {
   std::string rgb, depth, mask, camera, mesh, init, out, config, device;
   double depth_scale = 0.001, mesh_scale = 1.0;
   bool quiet = false;
+  bool print_config = false;
 };
 
 int usage_error(const std::string& what) {
@@ -256,6 +260,10 @@ int parse_args(int argc, char** argv, Args& a) {
     }
     if (k == "--quiet" || k == "-q") {
       a.quiet = true;
+      continue;
+    }
+    if (k == "--print-config") {
+      a.print_config = true;
       continue;
     }
     std::string* target = nullptr;
@@ -290,6 +298,7 @@ int parse_args(int argc, char** argv, Args& a) {
       *num = d;
     }
   }
+  if (a.print_config) return -1;
   std::string missing;
   for (const auto& [flag, val] : {std::pair<const char*, const std::string*>{"--rgb", &a.rgb},
                                   {"--camera", &a.camera}, {"--mesh", &a.mesh}, {"--init", &a.init},
@@ -310,6 +319,10 @@ int run(const Args& a) {
   if (!a.device.empty()) {
     options.device = a.device;
     about("--device", [&] { options.validate(); });
+  }
+  if (a.print_config) {
+    std::cout << options.to_yaml();
+    return 0;
   }
 
   Observation obs;

@@ -4,6 +4,7 @@
 #include <cmath>
 
 #include "base/option_range.hpp"
+#include "diffdope/option_table.hpp"
 
 namespace diffdope {
 
@@ -145,14 +146,24 @@ RefinerOptions tracked_options(const RefinerOptions& o, const TrackOptions& t) {
   return out;
 }
 
-void TrackOptions::validate() const {
-  const OptionRange check{"tracking options"};
-  check("max_detection_age", max_detection_age, 0, 3600, " seconds");
-  check("track_timeout", track_timeout, 0, 3600, " seconds");
-  check("max_track_failures", max_failures, 1, 1000);
-  check("max_extrapolation", max_extrapolation, 0, 100, " intervals");
-  check("track_batch_size", batch_size, 0, RefinerOptions::kMaxBatchSize, " (0: the refiner's)");
-  check("track_iterations", iterations, 0, RefinerOptions::kMaxIterations, " (0: the refiner's)");
+const std::vector<OptionSpec<TrackOptions>>& track_option_table() {
+  using T = TrackOptions;
+  static const std::vector<OptionSpec<T>> rows = {
+      option_row("max_detection_age", &T::max_detection_age, 0, 3600, " seconds",
+                 "between a detection's stamp and the image stamp"),
+      option_row("track_timeout", &T::track_timeout, 0, 3600, " seconds", "a refined pose may seed later frames this long"),
+      option_row("max_track_failures", &T::max_failures, 1, 1000, "", "implausible refinements in a row that drop a track"),
+      option_row("predict_motion", &T::predict, 0, 0, "", "also seed with the constant-velocity prediction"),
+      option_row("max_extrapolation", &T::max_extrapolation, 0, 100, " intervals",
+                 "the prediction extrapolates at most this multiple of the last interval"),
+      option_row("track_batch_size", &T::batch_size, 0, RefinerOptions::kMaxBatchSize, " (0: the refiner's)",
+                 "runs per refinement when every object starts from a steady track"),
+      option_row("track_iterations", &T::iterations, 0, RefinerOptions::kMaxIterations, " (0: the refiner's)",
+                 "iterations per refinement when every object starts from a steady track"),
+  };
+  return rows;
 }
+
+void TrackOptions::validate() const { check_option_ranges(track_option_table(), *this, {"tracking options"}); }
 
 }  // namespace diffdope

@@ -1,5 +1,5 @@
 // Camera-to-robot calibration: merged meshes, the URDF robot and its forward kinematics, several views of one
-// pose (Refiner::refine_views), and the calibration on a generated arm (the README's figure: three captures from
+// pose (Refiner::refine_views), and the calibration on a generated arm (docs/calibration.md's figure: three captures from
 // 5 cm / 10 degrees off, within 2 mm / 0.2 degrees).
 #include <gtest/gtest.h>
 

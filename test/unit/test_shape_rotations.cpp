@@ -133,7 +133,7 @@ TEST(Refiner, ThePrintAlignmentTurnsAboutTheAxisToTheLabel) {
   o.batch_size = 8;
   o.iterations = 30;
   o.coarse_fraction = 0.5;  // (at 0.75, 8 fine iterations: the scan then turns this colourless fit by 60
-                            // degrees on a near tie, out of the alignment's range; see the README)
+                            // degrees on a near tie, out of the alignment's range; see docs/benchmarks.md)
   o.image_scale = 1.0;
   o.loss.weight_rgb = 0;
   const RefineResult aligned = Refiner(o).refine(s.cam, s.obs, s.can, start);
