@@ -28,6 +28,10 @@ struct Observation {
   /// border), depth averaged over the valid readings of each block (blocks less than half measured: no reading).
   /// The texture gradients are not carried over (they depend on the scale): compute them again.
   Observation resized(const Camera& scaled_camera) const;
+
+  /// One object's observation in a frame: the frame's rgb, depth, edges and texture (shared, not copied) with
+  /// `object_mask` as its mask (empty: none).
+  Observation with_mask(const cv::Mat& object_mask) const;
 };
 
 /// The paper's observed edge map: Canny edges of the grey image (thresholds `low`, `high` on 8-bit grey),

@@ -226,7 +226,7 @@ struct ObjectTarget {
   bool explore = true;
 };
 
-class RefineRun;  // (src/core/refine_run.hpp)
+class RefineRun;  // (src/refine/refine_run.hpp)
 
 /// One view of a rigid target for Refiner::refine_views(): a camera, its images and the mesh as it is in that
 /// view. Every view has the same pose (model -> camera) and the same camera frame: e.g. captures of a robot by
@@ -237,48 +237,65 @@ struct RefineView {
   const Mesh* mesh = nullptr;
 };
 
+/// Refines poses. Options are passed per call (as Ceres passes Solver::Options to Solve); a call without them uses
+/// the options the Refiner was made with. A call's options must keep the Refiner's `device` and `render` (they
+/// built its renderer); every other option is free per call. Invalid options throw std::invalid_argument.
+/// Unusable input (a NaN or empty start, the object behind the camera or outside the image, images that do not
+/// match the camera, neither rgb nor depth) is never thrown: the result's `error` says what was wrong (pose =
+/// the first start, plausible = false), for refine(), refine_views() and refine_all() alike.
 class Refiner {
  public:
   explicit Refiner(const RefinerOptions& options = RefinerOptions());
   /// With a renderer of the caller's choosing (options.device is then not used).
   Refiner(const RefinerOptions& options, std::unique_ptr<Renderer> renderer);
+  /// The options of calls that pass none (those the Refiner was made with).
   const RefinerOptions& options() const { return options_; }
-  /// New options for the next calls, keeping the renderer and what it caches (levels of detail, uploaded meshes,
-  /// textures): runtime tuning and per-call overrides. Validates them; `device` and `render` must be unchanged
-  /// (they build the renderer: a new Refiner is needed). Throws std::invalid_argument, leaving the old options.
-  void set_options(const RefinerOptions& options);
   /// The backend in use ("cpu" or "cuda").
   std::string backend() const { return renderer_->name(); }
   /// Does now what the first refinement of `mesh` would otherwise pay: the shape analysis and print axes (cached
-  /// per mesh) and the renderer's copy of its geometry and textures (48 MB for a 2048^2 atlas). A node calls it
-  /// while loading its objects, so its first detection is refined as fast as the later ones.
+  /// per mesh and options) and the renderer's copy of its geometry and textures (48 MB for a 2048^2 atlas). A
+  /// node calls it while loading its objects, so its first detection is refined as fast as the later ones.
   void prepare(const Mesh& mesh);
 
   /// Refines one object. `observed` holds the full-resolution images (any of rgb / depth / mask may be
-  /// empty; at least one of rgb or depth is needed), `camera` their intrinsics. Throws std::invalid_argument
-  /// on unusable input (NaN pose, object behind the camera, images that do not match the camera).
-  RefineResult refine(const Camera& camera, const Observation& observed, const Mesh& mesh, const Pose& initial);
+  /// empty; at least one of rgb or depth is needed), `camera` their intrinsics.
+  RefineResult refine(const Camera& camera, const Observation& observed, const Mesh& mesh, const Pose& initial,
+                      const RefinerOptions& options);
+  RefineResult refine(const Camera& camera, const Observation& observed, const Mesh& mesh, const Pose& initial) {
+    return refine(camera, observed, mesh, initial, options_);
+  }
   /// Several initial poses (say a fresh detection and the previous frame's refined pose): run i starts from
   /// initials[i % n]; the lowest loss wins whichever start it came from (RefineResult::start says which).
   /// initial_loss is the lowest loss among the starts.
   RefineResult refine(const Camera& camera, const Observation& observed, const Mesh& mesh,
-                      const std::vector<Pose>& initials);
+                      const std::vector<Pose>& initials, const RefinerOptions& options);
+  RefineResult refine(const Camera& camera, const Observation& observed, const Mesh& mesh,
+                      const std::vector<Pose>& initials) {
+    return refine(camera, observed, mesh, initials, options_);
+  }
 
   /// Refines one pose seen in several views (the same algorithm; each hypothesis' loss and gradient are the mean
   /// over the views). No shape scan; `pivot_model` (model frame) is the point the steps turn about, e.g. the
   /// centre of what the views show. RefineResult::view_scores holds each view's scores; mask_iou /
   /// depth_inliers and the verdict are the weakest view's; no print registration or curvature probe.
   RefineResult refine_views(const std::vector<RefineView>& views, const std::vector<Pose>& initials,
-                            const Eigen::Vector3d& pivot_model);
+                            const Eigen::Vector3d& pivot_model, const RefinerOptions& options);
+  RefineResult refine_views(const std::vector<RefineView>& views, const std::vector<Pose>& initials,
+                            const Eigen::Vector3d& pivot_model) {
+    return refine_views(views, initials, pivot_model, options_);
+  }
 
   /// Refines every object of one frame (the frame's rgb and depth, each object's own mask). An object whose
-  /// input is unusable gets its reason in RefineResult::error (pose = initial, plausible = false); the others
-  /// are still refined. The objects run in lockstep: each iteration evaluates the runs of all objects in one
-  /// renderer call (one launch per stage on CUDA; one parallel loop over all their runs on the CPU), and the
-  /// frame is resized once for all of them.
+  /// input is unusable gets its reason in RefineResult::error; the others are still refined. The objects run in
+  /// lockstep: each iteration evaluates the runs of all objects in one renderer call (one launch per stage on
+  /// CUDA; one parallel loop over all their runs on the CPU), and the frame is resized once for all of them.
   /// Each result is what refine() would give for that object alone; on_iteration is not called.
   std::vector<RefineResult> refine_all(const Camera& camera, const Observation& frame,
-                                       const std::vector<ObjectTarget>& objects);
+                                       const std::vector<ObjectTarget>& objects, const RefinerOptions& options);
+  std::vector<RefineResult> refine_all(const Camera& camera, const Observation& frame,
+                                       const std::vector<ObjectTarget>& objects) {
+    return refine_all(camera, frame, objects, options_);
+  }
 
   /// Optional progress callback, called once per iteration of refine() (iteration 0..total, total = the
   /// configured iterations) with the best loss of any run so far; a retried refinement (retry_turn) counts
@@ -286,25 +303,27 @@ class Refiner {
   std::function<void(int iteration, int total, double best_loss)> on_iteration;
 
  private:
+  /// `o`, validated and checked against the renderer's device and render options.
+  const RefinerOptions& checked(const RefinerOptions& o) const;
   /// The model-frame turns the shape scan tries for `mesh` (none when not exploring).
-  std::vector<Pose> shape_turns(const Mesh& mesh, bool explore);
+  std::vector<Pose> shape_turns(const RefinerOptions& o, const Mesh& mesh, bool explore);
   /// The axes the print alignment turns `mesh` about (RefinerOptions::print_search; none when it is off).
-  std::vector<ShapeRotation> print_axes(const Mesh& mesh);
+  std::vector<ShapeRotation> print_axes(const RefinerOptions& o, const Mesh& mesh);
   /// Whether the model-frame `turn` is one of the mesh's declared symmetries.
-  bool is_declared_turn(const Mesh& mesh, const Pose& turn) const;
+  bool is_declared_turn(const RefinerOptions& o, const Mesh& mesh, const Pose& turn) const;
   /// The shape analysis of `mesh`, computed once per mesh.
   const std::vector<ShapeRotation>& shape_rotations(const Mesh& mesh);
   /// The refinement loop of one run (refine(), refine_views()); refine_all() steps several in lockstep.
   RefineResult drive(RefineRun& run);
-  /// One pass of refine() / refine_all(), without the retry.
-  RefineResult refine_once(const Camera& camera, const Observation& observed, const Mesh& mesh,
-                           const std::vector<Pose>& initials);
-  std::vector<RefineResult> refine_all_once(const Camera& camera, const Observation& frame,
+  /// One pass of refine() / refine_all(), without the retry; refine_once() throws on unusable input.
+  RefineResult refine_once(const RefinerOptions& o, const Camera& camera, const Observation& observed,
+                           const Mesh& mesh, const std::vector<Pose>& initials);
+  std::vector<RefineResult> refine_all_once(const RefinerOptions& o, const Camera& camera, const Observation& frame,
                                             const std::vector<ObjectTarget>& objects);
   /// Whether `first` is rejected and due for a retry (RefinerOptions::retry_turn).
-  bool wants_retry(const RefineResult& first) const;
+  static bool wants_retry(const RefinerOptions& o, const RefineResult& first);
   /// The retry's starts: `initials`, then each turned by +-retry_turn about the principal axes of `mesh`.
-  std::vector<Pose> retry_starts(const Mesh& mesh, const std::vector<Pose>& initials);
+  std::vector<Pose> retry_starts(const RefinerOptions& o, const Mesh& mesh, const std::vector<Pose>& initials);
 
   RefinerOptions options_;
   std::unique_ptr<Renderer> renderer_;

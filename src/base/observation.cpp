@@ -67,6 +67,12 @@ Observation Observation::resized(const Camera& cam) const {
   return out;
 }
 
+Observation Observation::with_mask(const cv::Mat& object_mask) const {
+  Observation out = *this;
+  out.mask = object_mask;
+  return out;
+}
+
 cv::Mat observed_edges(const cv::Mat& rgb_float, double low, double high, double sigma) {
   cv::Mat grey, grey8, canny, soft;
   cv::cvtColor(rgb_float, grey, cv::COLOR_RGB2GRAY);

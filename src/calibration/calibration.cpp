@@ -108,11 +108,8 @@ CalibrationResult Calibrator::calibrate(const RobotModel& robot, const std::vect
     refiner_.on_iteration = nullptr;
     if (on_iteration)
       refiner_.on_iteration = [this, pass](int k, int total, double loss) { on_iteration(pass, k, total, loss); };
-    try {
-      out.refine = refiner_.refine_views(views, {from}, centre);
-    } catch (const std::invalid_argument& e) {
-      throw std::invalid_argument(std::string("calibrate: ") + e.what());
-    }
+    out.refine = refiner_.refine_views(views, {from}, centre);
+    if (!out.refine.error.empty()) throw std::invalid_argument("calibrate: " + out.refine.error);
     from = out.refine.pose;
     ++out.passes;
   }

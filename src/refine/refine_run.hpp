@@ -136,6 +136,28 @@ class RefineRun {
   int polish_iterations_ = 0;
   /// The last descent (RefinerOptions::polish_iterations) from res.pose, keeping the lowest loss seen.
   void polish(Renderer& renderer, RefineResult& res);
+  // finish()'s steps.
+  /// The run of lowest loss among runs [first, last) (-1: none).
+  int lowest(const RefineResult& res, int first, int last) const;
+  /// Makes run `i`'s best the result.
+  void take(RefineResult& res, int i) const;
+  /// The result's print significance, measured once when needed (the candidate's check, the print turn's).
+  struct ResultPrint {
+    const RefineRun& run;
+    double z = 0;
+    bool known = false;
+    double at(Renderer& renderer, const RefineResult& res);
+  };
+  /// After a coarse phase: the initial loss at the fine scale, and a start no run beat as the result.
+  void weigh_starts(Renderer& renderer, RefineResult& res);
+  /// The shape scan's best candidate replaces the start's basin when the evidence supports the jump.
+  void weigh_candidate(Renderer& renderer, RefineResult& res, ResultPrint& print);
+  /// The print alignment's turn about print_axes_, kept when the loss and the print's registration allow it.
+  void align_result_print(Renderer& renderer, RefineResult& res, ResultPrint& print);
+  /// Mask IoU, depth inliers and print registration at the result, per view; returns the rendered pixels.
+  int score_views(Renderer& renderer, RefineResult& res) const;
+  /// Curvature, covariance, convergence, verdict and time of the result.
+  void judge_result(Renderer& renderer, RefineResult& res, int rendered_pixels) const;
   int scan_at_ = -1;         // the iteration whose batch() is preceded by the scan (-1: none)
   bool scanning_ = false, scanned_ = false;
   double best_overall_;

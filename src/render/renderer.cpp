@@ -29,11 +29,7 @@ std::vector<Observation> Renderer::object_observations(const Camera& camera, con
     const ObjectBatch& b = objects[k];
     if (!b.mesh) throw std::invalid_argument("evaluate_objects: object " + std::to_string(k) + " has no mesh");
     if (!(b.loss.depth_truncation > 0)) throw std::invalid_argument("loss: depth_truncation must be > 0");
-    obs[k].rgb = frame.rgb;
-    obs[k].depth = frame.depth;
-    obs[k].edges = frame.edges;
-    obs[k].texture = frame.texture;
-    obs[k].mask = b.mask;
+    obs[k] = frame.with_mask(b.mask);
     obs[k].validate(camera);
   }
   return obs;

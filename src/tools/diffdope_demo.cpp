@@ -97,11 +97,9 @@ int main(int argc, char** argv) {
         noise.brightness = 0.85 + 0.15 * U(rng);
         const Observation obs = synthesize_observation(*render, cam, obj.mesh, truth, noise, uint32_t(rng()));
         const Pose init = perturb_pose(truth, obj.mesh.center(), lv.first * M_PI / 180, lv.second, rng);
-        RefineResult r;
-        try {
-          r = refiner.refine(cam, obs, obj.mesh, init);
-        } catch (const std::exception& e) {
-          std::cerr << "diffdope_demo: " << e.what() << "\n";
+        const RefineResult r = refiner.refine(cam, obs, obj.mesh, init);
+        if (!r.error.empty()) {
+          std::cerr << "diffdope_demo: " << r.error << "\n";
           return 1;
         }
         const double ai = add_error(pts, init, truth), ar = add_error(pts, r.pose, truth);

@@ -206,6 +206,12 @@ int main(int argc, char** argv) {
           const Mesh& mesh = data.model(p.obj_id);
           const Observation obs = data.observation(img, gt->inst);
           const RefineResult r = refiner.refine(img.camera, obs, mesh, p.pose);
+          if (!r.error.empty()) {
+            std::cerr << "\ndiffdope_eval: " << file.string() << " sample " << p.sample << ": obj " << p.obj_id
+                      << " in scene " << scene << ": " << r.error << "; skipped\n";
+            ++skipped;
+            continue;
+          }
           const auto pts = metric_points(mesh);
           const bool sym = data.symmetric(p.obj_id);
           const double e0 = sym ? adds_error(pts, p.pose, gt->pose) : add_error(pts, p.pose, gt->pose);

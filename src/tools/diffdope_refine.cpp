@@ -373,12 +373,10 @@ int run(const Args& a) {
       std::fflush(stderr);
     };
   }
-  RefineResult r;
-  try {
-    r = refiner.refine(cam, obs, mesh, initial);
-  } catch (const std::exception& e) {
+  const RefineResult r = refiner.refine(cam, obs, mesh, initial);
+  if (!r.error.empty()) {
     if (progress) std::fprintf(stderr, "\n");
-    const std::string m = e.what();
+    const std::string& m = r.error;
     fail(m.find("initial pose") != std::string::npos ? a.init
          : m.find("mask") != std::string::npos       ? (a.mask.empty() ? a.rgb : a.mask)
                                                      : a.rgb,

@@ -185,7 +185,9 @@ TEST(RefineViews, SeveralViewsOfOnePose) {
   EXPECT_TRUE(res.plausible);
   // One view without a mask while the other has one is refused.
   views[1].observed.mask = cv::Mat();
-  EXPECT_THROW(refiner.refine_views(views, {init}, block.center()), std::invalid_argument);
+  const RefineResult refused = refiner.refine_views(views, {init}, block.center());
+  EXPECT_NE(refused.error.find("mask"), std::string::npos) << refused.error;
+  EXPECT_FALSE(refused.plausible);
 }
 
 TEST(Calibration, ThreeCapturesFromFiveCentimetresAndTenDegrees) {

@@ -434,7 +434,7 @@ TEST_F(RefineCliTest, DeviceFlag) {
     EXPECT_NE(c.err.find("unavailable"), std::string::npos) << c.err;
     EXPECT_EQ(count_lines(c.err), 1) << c.err;
   }
-  expect_error(run(args("err_dev", {{"--device", "gpu"}}), "device_gpu"), "--device", "auto, cpu or cuda");
+  expect_error(run(args("err_dev", {{"--device", "gpu"}}), "device_gpu"), "--device", "is not one of cpu, cuda, auto");
 }
 
 // ---- Usage errors: exit code 2 ----

@@ -2,6 +2,7 @@
 // background and a brightness mismatch), its options, and its input checks.
 #include <gtest/gtest.h>
 
+#include <cstring>
 #include <map>
 
 #include "diffdope/device.hpp"
@@ -251,7 +252,7 @@ TEST(Refiner, SameSeedSameResultOtherSeedOtherRates) {
   }
 }
 
-TEST(Refiner, NewOptionsOnARunningRefinerActAsANewRefiner) {
+TEST(Refiner, OptionsPassedPerCallActAsANewRefiner) {
   const Scene s = make_scene(4);
   std::mt19937_64 rng(4);
   const Pose init = perturb_pose(s.truth, s.mesh.center(), 10 * M_PI / 180, 0.01, rng);
@@ -264,26 +265,26 @@ TEST(Refiner, NewOptionsOnARunningRefinerActAsANewRefiner) {
   tuned.batch_size = 5;
   tuned.seed = 3;
   tuned.loss.weight_rgb = 0.5;
-  running.set_options(tuned);
-  const RefineResult a = running.refine(s.cam, s.obs, s.mesh, init);
+  const RefineResult a = running.refine(s.cam, s.obs, s.mesh, init, tuned);
   const RefineResult b = Refiner(tuned).refine(s.cam, s.obs, s.mesh, init);
   EXPECT_EQ(a.iterations, 7);
   EXPECT_EQ(a.run_losses.size(), 5u);
   EXPECT_EQ(a.pose.matrix(), b.pose.matrix());
   EXPECT_EQ(a.learning_rates, b.learning_rates);
-  // What builds the renderer cannot change, nor can an invalid value; the options stay as they were.
+  // A call without options runs with the Refiner's own, untouched by the call before.
+  EXPECT_EQ(running.refine(s.cam, s.obs, s.mesh, init).iterations, 20);
+  EXPECT_EQ(running.options().iterations, 20);
+  // What builds the renderer cannot change per call, nor can an invalid value pass.
   RefinerOptions other = tuned;
   other.render.lod_pixel_error = 1.0;
-  EXPECT_THROW(running.set_options(other), std::invalid_argument);
+  EXPECT_THROW(running.refine(s.cam, s.obs, s.mesh, init, other), std::invalid_argument);
   other = tuned;
   other.device = "cuda";
-  EXPECT_THROW(running.set_options(other), std::invalid_argument);
+  EXPECT_THROW(running.refine(s.cam, s.obs, s.mesh, init, other), std::invalid_argument);
   other = tuned;
   other.lr_low = 2 * other.lr_high;
-  EXPECT_THROW(running.set_options(other), std::invalid_argument);
-  EXPECT_EQ(running.options().iterations, 7);
-  EXPECT_EQ(running.options().render, tuned.render);
-  EXPECT_EQ(running.options().lr_low, tuned.lr_low);
+  EXPECT_THROW(running.refine(s.cam, s.obs, s.mesh, init, other), std::invalid_argument);
+  EXPECT_THROW(running.refine_all(s.cam, s.obs, {}, other), std::invalid_argument);
 }
 
 TEST(Refiner, WorksWithEachModalityMissing) {
@@ -319,24 +320,33 @@ TEST(Refiner, EarlyStopEndsWhenNothingImproves) {
   EXPECT_EQ(r.history.size(), size_t(r.iterations + 1));
 }
 
-TEST(Refiner, RejectsBadInput) {
+// Unusable input is reported in the result (the start returned, not plausible), never thrown.
+TEST(Refiner, ReportsUnusableInputInTheResult) {
   const Scene s = make_scene(7);
   Refiner refiner(test_options());
+  const auto expect_error = [&](const Observation& obs, const Pose& start, const std::string& says) {
+    const RefineResult r = refiner.refine(s.cam, obs, s.mesh, start);
+    EXPECT_NE(r.error.find(says), std::string::npos) << "error: '" << r.error << "', expected '" << says << "'";
+    EXPECT_FALSE(r.plausible);
+    // The result keeps the start (NaN compares unequal to itself, so compare bit patterns).
+    EXPECT_EQ(0, std::memcmp(r.initial_pose.t.data(), start.t.data(), sizeof(double) * 3));
+    EXPECT_EQ(0, std::memcmp(r.pose.t.data(), start.t.data(), sizeof(double) * 3));
+  };
   Pose nan_pose = s.truth;
   nan_pose.t.z() = std::nan("");
-  EXPECT_THROW(refiner.refine(s.cam, s.obs, s.mesh, nan_pose), std::invalid_argument);
+  expect_error(s.obs, nan_pose, "finite");
   Pose behind = s.truth;
   behind.t.z() = -0.5;
-  EXPECT_THROW(refiner.refine(s.cam, s.obs, s.mesh, behind), std::invalid_argument);
+  expect_error(s.obs, behind, "behind");
   Observation empty_mask = s.obs;
   empty_mask.mask = cv::Mat::zeros(s.cam.height, s.cam.width, CV_32F);
-  EXPECT_THROW(refiner.refine(s.cam, empty_mask, s.mesh, s.truth), std::invalid_argument);
+  expect_error(empty_mask, s.truth, "mask");
   Observation wrong_size = s.obs;
   wrong_size.depth = cv::Mat::zeros(10, 10, CV_32F);
-  EXPECT_THROW(refiner.refine(s.cam, wrong_size, s.mesh, s.truth), std::invalid_argument);
+  expect_error(wrong_size, s.truth, "depth");
   Observation nothing;
   nothing.mask = s.obs.mask;
-  EXPECT_THROW(refiner.refine(s.cam, nothing, s.mesh, s.truth), std::invalid_argument);
+  expect_error(nothing, s.truth, "rgb");
 }
 
 TEST(Refiner, RefinesEveryObjectOfAFrameAndReportsBadOnes) {
