@@ -199,7 +199,7 @@ struct RefineResult {
   /// probed. covariance_at_origin(covariance, pivot, frame_origin) gives ROS's PoseWithCovariance layout.
   Matrix6d covariance = Matrix6d::Zero();
   Eigen::Vector3d pivot = Eigen::Vector3d::Zero();  // the object's centre at the refined pose (camera frame)
-  std::string error;                  // refine_all(): why this object could not be refined (empty = refined)
+  std::string error;                  // why the input could not be refined (empty = refined; then pose = the start)
   /// refine_views(): each view's scores at the result (loss at image_scale; -1 = not available).
   struct ViewScores {
     double loss = 0, mask_iou = -1, depth_inliers = -1;

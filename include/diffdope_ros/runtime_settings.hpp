@@ -6,14 +6,9 @@
 #include "diffdope/object_track.hpp"
 #include "diffdope/refiner.hpp"
 #include "diffdope_ros/RefinerConfig.h"
+#include "diffdope_ros/stream_mode.hpp"
 
 namespace diffdope_ros {
-
-/// When frames are refined (~mode).
-enum class StreamMode { kContinuous, kTracking, kOnRequest };
-const char* to_string(StreamMode mode);
-/// Throws std::invalid_argument for anything but "continuous", "tracking", "on_request".
-StreamMode parse_stream_mode(const std::string& name);
 
 struct RuntimeSettings {
   StreamMode mode = StreamMode::kTracking;

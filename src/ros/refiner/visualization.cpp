@@ -1,11 +1,12 @@
 // RefinerNodelet's visual outputs, computed only while someone subscribes: the overlay image (initial and refined
 // outlines over the RGB image) and the meshes as rviz markers.
+#include <cv_bridge/cv_bridge.h>
 #include <opencv2/imgproc.hpp>
 #include <sensor_msgs/image_encodings.h>
 #include <visualization_msgs/MarkerArray.h>
 
 #include "diffdope_ros/conversions.hpp"
-#include "diffdope_ros/refiner_nodelet.hpp"
+#include "ros/refiner/refiner_nodelet.hpp"
 
 namespace diffdope_ros {
 

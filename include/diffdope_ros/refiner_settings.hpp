@@ -1,0 +1,56 @@
+#pragma once
+// The refiner nodelet's launch-time ~parameters, read once into one value and checked in one place; the node
+// then only reads them. What may change while it runs (mode, refiner and track options) starts from here and
+// lives in RuntimeSettings. Names and defaults: docs/ros.md.
+#include <cstdint>
+#include <map>
+#include <string>
+
+#include "diffdope/object_track.hpp"
+#include "diffdope_ros/stream_mode.hpp"
+
+namespace ros {
+class NodeHandle;
+}
+
+namespace diffdope_ros {
+
+class ErrorReporter;
+
+struct RefinerSettings {
+  StreamMode mode = StreamMode::kTracking;  // ~mode
+  bool use_depth = true;                    // ~use_depth
+  bool use_mask = false;                    // ~use_mask
+  bool publish_tf = true;                   // ~publish_tf
+  bool publish_implausible = false;         // ~publish_implausible
+  int queue_size = 10;                      // ~queue_size (messages)
+  double max_interval = 0.1;                // ~max_interval (s): stamps of one synchronized set
+  double sync_timeout = 3.0;                // ~sync_timeout (s): no synchronized set for this long is an error
+  double tf_timeout = 0.1;                  // ~tf_timeout (s, wall time)
+  /// ~max_request_time (s): a ~refine call estimated to take longer is refused (it would stop streaming that long).
+  double max_request_time = 10.0;
+  double error_throttle = 5.0;              // ~error_throttle (s): one log line per error category and period
+  std::string frame_prefix = "diffdope_";   // ~frame_prefix: TF child frame = prefix + instance name
+  std::string fixed_frame;                  // ~fixed_frame: detections stamped at another time go through it
+  std::string detection_prefix = "/dope/pose_";  // ~detection_topic_prefix
+  std::string detections_topic;             // ~detections_topic: DOPE's Detection3DArray ("" = off)
+  std::map<std::string, int64_t> class_ids;  // ~class_ids: object name -> DOPE class id
+  /// ~max_detection_age, ~track_timeout, ~max_track_failures, ~predict_motion; tracking follows the mode.
+  diffdope::TrackOptions track;
+  std::string objects_config;               // ~objects_config (required)
+  std::string refiner_config;               // ~refiner_config: overrides the objects file's refiner section
+  std::string device;                       // ~device ("" = the YAML's choice)
+  /// The first value out of its range (check_refiner_settings): a configuration error, nothing is refined.
+  std::string error;
+};
+
+/// Range checks. On a value outside its range `error` names it, and the input settings go back to their
+/// defaults, so that the inputs still come up and their counts and diagnostics keep working.
+void check_refiner_settings(RefinerSettings& settings);
+
+/// Reads every ~parameter of `pnh` once and checks them (check_refiner_settings). An unknown ~mode is logged
+/// (as `node_name`) and read as tracking; a malformed ~class_ids goes to `errors`.
+RefinerSettings load_refiner_settings(const ros::NodeHandle& pnh, const std::string& node_name,
+                                      ErrorReporter& errors);
+
+}  // namespace diffdope_ros

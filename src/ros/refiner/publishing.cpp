@@ -1,0 +1,119 @@
+// RefinerNodelet's outputs for one refinement: the tracks' outcome, per-instance poses (with covariance), TF, the
+// RefinedPoseArray with every score, statistics, and the visual outputs while someone subscribes.
+#include <geometry_msgs/PoseWithCovarianceStamped.h>
+
+#include <algorithm>
+
+#include "diffdope/pose_curvature.hpp"
+#include "diffdope_ros/conversions.hpp"
+#include "ros/refiner/refiner_nodelet.hpp"
+
+namespace diffdope_ros {
+namespace {
+
+diffdope_ros::RefinedPose refined_pose_msg(const diffdope::RefineResult& r, const diffdope::Seed& seed,
+                                           const diffdope::Pose& refined, const diffdope::Pose& inv_model) {
+  diffdope_ros::RefinedPose p;
+  p.pose.pose = pose_to_msg(refined * inv_model);
+  p.initial_pose = pose_to_msg(seed.pose * inv_model);
+  p.source = diffdope::to_string(seed.source);
+  p.mask_iou = r.mask_iou;
+  p.depth_inliers = r.depth_inliers;
+  p.loss = r.loss.total;
+  p.initial_loss = r.initial_loss;
+  p.converged = r.converged;
+  p.plausible = r.plausible;
+  p.confidence = r.confidence;
+  p.iterations = r.iterations;
+  p.time_ms = r.time_ms;
+  return p;
+}
+
+}  // namespace
+
+std::vector<diffdope_ros::RefinedPose> RefinerNodelet::publishResults(
+    const Frame& frame, const SeedList& seeds, const TargetList& target_of, const std::vector<size_t>& seeds_of,
+    const std::vector<diffdope::RefineResult>& results, std::vector<std::string>* skipped, ros::WallTime start) {
+  std::vector<diffdope_ros::RefinedPose> out;
+  std::vector<geometry_msgs::TransformStamped> transforms;
+  int implausible = 0;
+  for (size_t n = 0; n < results.size(); ++n) {
+    const auto [i, k] = target_of[n];
+    Slot& s = *slots_[i];
+    Instance& in = s.instances[size_t(k)];
+    const diffdope::RefineResult& r = results[n];
+    const std::vector<diffdope::Seed>& starts = seeds[seeds_of[n]].starts;
+    if (!r.error.empty()) {
+      errors_.error("refine_" + in.name, "object '" + in.name + "' not refined: " + r.error);
+      if (skipped) skipped->push_back(in.name + " (" + r.error + ")");
+      if (s.tracks->report(k, starts.front().pose, false, frame.header.stamp.toSec())) reportLostTrack(s, k);
+      continue;
+    }
+    const diffdope::Seed& seed = starts[std::min<size_t>(size_t(r.start), starts.size() - 1)];
+    // No spin / flip of a symmetric object between frames.
+    const diffdope::Pose refined = s.tracks->track(k).reported_pose(r.pose, s.mesh->symmetry);
+    if (s.tracks->report(k, refined, r.plausible, frame.header.stamp.toSec())) reportLostTrack(s, k);
+    implausible += !r.plausible;
+    const diffdope::Pose inv_model = s.config.model_transform.inverse();
+    diffdope_ros::RefinedPose p = refined_pose_msg(r, seed, refined, inv_model);
+    p.name = s.config.name;
+    p.instance = k;
+    p.pose.header = frame.header;
+    out.push_back(p);
+    if (!r.plausible && !publish_implausible_) continue;  // scores still go out in ~refined_poses
+    in.pose_pub.publish(p.pose);
+    if (r.curvature.valid) {  // the pose with the covariance the loss's curvature gives (pose_curvature.hpp)
+      geometry_msgs::PoseWithCovarianceStamped c;
+      c.header = p.pose.header;
+      c.pose.pose = p.pose.pose;
+      const diffdope::Matrix6d cov = diffdope::covariance_at_origin(r.covariance, r.pivot, (refined * inv_model).t);
+      for (int a = 0; a < 6; ++a)
+        for (int b = 0; b < 6; ++b) c.pose.covariance[size_t(6 * a + b)] = cov(a, b);
+      in.cov_pub.publish(c);
+    }
+    if (in.last_tf_stamp == frame.header.stamp) continue;  // already on TF for this image: listeners keep the first
+    in.last_tf_stamp = frame.header.stamp;
+    geometry_msgs::TransformStamped t;
+    t.header = frame.header;
+    t.child_frame_id = settings_.frame_prefix + in.name;
+    t.transform = transform_to_msg(refined * inv_model);
+    transforms.push_back(t);
+  }
+  if (settings_.publish_tf && !transforms.empty()) tf_broadcaster_->sendTransform(transforms);
+  const double latency = (ros::Time::now() - frame.header.stamp).toSec();
+  diffdope_ros::RefinedPoseArray array;
+  array.header = frame.header;
+  array.poses = out;
+  array.latency = latency;
+  array.processing_time = (ros::WallTime::now() - frame.received).toSec();
+  refined_pub_.publish(array);
+  {
+    std::lock_guard<std::mutex> lock(work_mutex_);
+    const ros::WallTime now = ros::WallTime::now();
+    if (stats_.frames_refined == 0) stats_.first_refined = now;
+    stats_.last_refined = now;
+    ++stats_.frames_refined;
+    stats_.objects_refined += long(out.size());
+    stats_.implausible += implausible;
+    stats_.last_latency = latency;
+    stats_.latency_sum += latency;
+    stats_.last_refine_ms = (now - start).toSec() * 1e3;
+    stats_.ms_per_evaluation = 1e3 * refine_time_.seconds_per_evaluation();
+    stats_.cost_measured = refine_time_.observations() > 0;
+  }
+  try {  // visualisation must never cost the refinement its result
+    if (overlay_pub_.getNumSubscribers() > 0) publishOverlay(frame, target_of, results);
+    if (markers_pub_.getNumSubscribers() > 0) publishMarkers(frame, target_of, results);
+  } catch (const std::exception& e) {
+    errors_.error("visualisation", std::string("overlay/markers not published: ") + e.what());
+  }
+  return out;
+}
+
+void RefinerNodelet::reportLostTrack(const Slot& s, int instance) {
+  const std::string& name = s.instances[size_t(instance)].name;
+  errors_.warn("lost_" + name, "lost track of '" + name + "' (" + std::to_string(track_options_.max_failures) +
+                                   " implausible refinements in a row); waiting for a detection");
+}
+
+}  // namespace diffdope_ros

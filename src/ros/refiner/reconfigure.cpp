@@ -1,0 +1,47 @@
+// RefinerNodelet's runtime tuning (cfg/Refiner.cfg): the server starts from the node's own values, checks what
+// it is sent (runtime_settings.hpp) and hands accepted values to the worker.
+#include <boost/bind/bind.hpp>
+
+#include "ros/refiner/refiner_nodelet.hpp"
+
+namespace diffdope_ros {
+
+void RefinerNodelet::setupReconfigure() {
+  runtime_settings_ = {mode_, refiner_options_, track_options_, publish_implausible_};
+  applied_config_ = to_config(runtime_settings_);
+  // The server starts from the node's own values (YAML, then ~parameters), not from the .cfg defaults. Its
+  // constructor advertises set_parameters before updateConfig below: holding the server's mutex makes a call that
+  // arrives in between wait, instead of seeing (and applying) the .cfg defaults.
+  boost::recursive_mutex::scoped_lock lock(reconfigure_mutex_);
+  reconfigure_server_ =
+      std::make_unique<dynamic_reconfigure::Server<RefinerConfig>>(reconfigure_mutex_, getPrivateNodeHandle());
+  reconfigure_server_->updateConfig(applied_config_);
+  reconfigure_server_->setCallback(
+      boost::bind(&RefinerNodelet::onReconfigure, this, boost::placeholders::_1, boost::placeholders::_2));
+}
+
+void RefinerNodelet::onReconfigure(RefinerConfig& config, uint32_t level) {
+  RuntimeSettings settings;
+  try {
+    settings = from_config(config, runtime_settings_);
+  } catch (const std::invalid_argument& e) {
+    errors_.error("reconfigure", std::string("reconfigure refused, the previous values stay: ") + e.what());
+    config = applied_config_;  // the server publishes what is in force
+    return;
+  }
+  runtime_settings_ = settings;
+  applied_config_ = config;
+  if (level == ~0u) return;  // setCallback's first call: the values the node started with
+  {
+    std::lock_guard<std::mutex> lock(work_mutex_);
+    pending_settings_ = settings;
+    if (settings.mode == StreamMode::kOnRequest) frame_pending_ = false;  // nothing more is streamed, not even that one
+  }
+  mode_ = settings.mode;  // the input callbacks read it; the rest the worker takes at its next job
+  NODELET_INFO_STREAM("reconfigured: mode " << to_string(settings.mode) << ", " << settings.refiner.batch_size
+                                            << " runs x " << settings.refiner.iterations
+                                            << " iterations, image scale " << settings.refiner.image_scale
+                                            << " (from the next frame)");
+}
+
+}  // namespace diffdope_ros

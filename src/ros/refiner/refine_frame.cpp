@@ -1,0 +1,69 @@
+// One refinement on a frame: the targets (meshes, starts, each instance's part of its object's mask), one call of
+// the node's refiner for all of them, then publishing (publishing.cpp).
+#include "diffdope/instance_masks.hpp"
+#include "diffdope_ros/conversions.hpp"
+#include "ros/refiner/refiner_nodelet.hpp"
+
+namespace diffdope_ros {
+
+std::vector<diffdope_ros::RefinedPose> RefinerNodelet::refineAndPublish(const Frame& frame, const SeedList& seeds,
+                                                                        const diffdope::RefinerOptions& options,
+                                                                        std::vector<std::string>* skipped) {
+  const ros::WallTime start = ros::WallTime::now();
+  std::vector<diffdope::ObjectTarget> targets;
+  TargetList target_of;  // (slot, instance) per target
+  std::vector<size_t> seeds_of;
+  // An object's mask, split among its instances refined on this frame (one label for all of them).
+  std::map<size_t, std::vector<cv::Mat>> instance_masks;
+  if (!frame.labels.empty()) {
+    std::map<size_t, std::vector<size_t>> of_object;
+    for (size_t n = 0; n < seeds.size(); ++n) of_object[seeds[n].object].push_back(n);
+    for (const auto& [i, list] : of_object) {
+      const Slot& s = *slots_[i];
+      const cv::Mat mask = object_mask(frame.labels, s.config.mask_label);
+      if (s.config.max_instances == 1) {
+        instance_masks[i] = {mask};
+        continue;
+      }
+      std::vector<diffdope::Pose> starts;
+      for (size_t n : list) starts.push_back(seeds[n].starts.front().pose);
+      instance_masks[i] =
+          diffdope::split_mask_among_instances(mask, frame.camera, *s.mesh, starts, options.no_mask_window);
+    }
+  }
+  std::map<size_t, size_t> used_masks;  // per object: how many of its split masks are taken
+  for (size_t n = 0; n < seeds.size(); ++n) {
+    const auto& [i, k, starts] = seeds[n];
+    Slot& s = *slots_[i];
+    const Instance& in = s.instances[size_t(k)];
+    diffdope::ObjectTarget t;
+    t.mesh = s.mesh.get();
+    t.initial = starts.front().pose;
+    for (size_t j = 1; j < starts.size(); ++j) t.alternatives.push_back(starts[j].pose);
+    t.explore = diffdope::explores(starts);  // (shape scan, retry: not from a live track)
+    if (!frame.labels.empty()) {
+      t.mask = instance_masks[i][used_masks[i]++];
+      if (cv::countNonZero(t.mask) == 0) {
+        // The segmentation says the object is not visible: refining against an empty mask would push it away.
+        errors_.warn("empty_mask_" + in.name, "object '" + in.name + "' has no pixels in the mask (label " +
+                                                  std::to_string(s.config.mask_label) + "): not refined");
+        if (s.tracks->report(k, t.initial, false, frame.header.stamp.toSec())) reportLostTrack(s, k);
+        if (skipped) skipped->push_back(in.name + " (no pixels with its label in the mask)");
+        continue;
+      }
+    }
+    targets.push_back(t);
+    target_of.emplace_back(i, k);
+    seeds_of.push_back(n);
+  }
+  if (targets.empty()) return {};
+  // Per-call options (tracking budget, service overrides) run on the node's refiner (its meshes stay cached).
+  const ros::WallTime refine_start = ros::WallTime::now();
+  const std::vector<diffdope::RefineResult> results =
+      refiner_->refine_all(frame.camera, frame.observation, targets, options);
+  refine_time_.observe(double(diffdope::planned_evaluations(options)) * double(targets.size()),
+                       (ros::WallTime::now() - refine_start).toSec());
+  return publishResults(frame, seeds, target_of, seeds_of, results, skipped, start);
+}
+
+}  // namespace diffdope_ros

@@ -1,0 +1,179 @@
+// RefinerNodelet set-up (refiner_nodelet.hpp): settings, objects, outputs, inputs, the worker; the hand-over of
+// synchronized frames to the worker; the watchdog; teardown.
+#include "ros/refiner/refiner_nodelet.hpp"
+
+#include <geometry_msgs/PoseWithCovarianceStamped.h>
+#include <pluginlib/class_list_macros.hpp>
+#include <ros/package.h>
+#include <visualization_msgs/MarkerArray.h>
+
+#include "diffdope_ros/conversions.hpp"
+
+namespace diffdope_ros {
+
+void RefinerNodelet::onInit() {
+  ros::NodeHandle& nh = getNodeHandle();
+  ros::NodeHandle& pnh = getPrivateNodeHandle();
+  settings_ = load_refiner_settings(pnh, getName(), errors_);
+  if (settings_.error.empty()) errors_.set_throttle_period(settings_.error_throttle);
+  mode_ = settings_.mode;
+  track_options_ = settings_.track;
+  publish_implausible_ = settings_.publish_implausible;
+
+  tf_buffer_ = std::make_unique<tf2_ros::Buffer>(ros::Duration(30.0));
+  tf_listener_ = std::make_unique<tf2_ros::TransformListener>(*tf_buffer_, nh);
+  tf_broadcaster_ = std::make_unique<tf2_ros::TransformBroadcaster>();
+  refined_pub_ = pnh.advertise<diffdope_ros::RefinedPoseArray>("refined_poses", 10);
+  markers_pub_ = pnh.advertise<visualization_msgs::MarkerArray>("markers", 1);
+  it_ = std::make_unique<image_transport::ImageTransport>(nh);
+  image_transport::ImageTransport pit(pnh);
+  overlay_pub_ = pit.advertise("overlay", 1);
+
+  loadObjects();
+  std::vector<DetectionInbox::Object> inbox_objects;
+  for (const auto& slot : slots_)
+    inbox_objects.push_back({slot->config.name, slot->config.max_instances, slot->config.pose_topic});
+  inbox_ = std::make_unique<DetectionInbox>(std::move(inbox_objects), settings_, errors_);
+
+  diagnostics_ = std::make_unique<diagnostic_updater::Updater>(nh, pnh, getName());
+  diagnostics_->setHardwareID("diffdope_refiner");
+  diagnostics_->add("refiner", this, &RefinerNodelet::onDiagnostics);
+
+  setupReconfigure();
+  worker_ = std::thread([this] { workerLoop(); });
+  inbox_->subscribe(nh, pnh);
+  input_sync_.start(nh, pnh, *it_, [this](std::shared_ptr<Frame> frame) { onFrame(std::move(frame)); });
+  // The service runs on its own queue and thread: a call waits for the worker without holding up the inputs or
+  // the other nodelets of the manager. Calls are served one after the other (the worker refines one at a time).
+  ros::NodeHandle service_nh(pnh);
+  service_nh.setCallbackQueue(&service_queue_);
+  refine_srv_ = service_nh.advertiseService("refine", &RefinerNodelet::onRefineService, this);
+  service_spinner_ = std::make_unique<ros::AsyncSpinner>(1, &service_queue_);
+  service_spinner_->start();
+  watchdog_timer_ = pnh.createWallTimer(ros::WallDuration(1.0), &RefinerNodelet::onWatchdog, this);
+  const diffdope::RefinerOptions& o = refiner_options_;
+  const diffdope::TrackOptions& t = track_options_;
+  NODELET_INFO_STREAM("diffdope refiner ready: mode "
+                      << to_string(mode_) << ", inputs rgb" << (settings_.use_depth ? "+depth" : "")
+                      << (settings_.use_mask ? "+mask" : "") << ", " << slots_.size() << " object(s), "
+                      << o.batch_size << " runs x " << o.iterations << " iterations (steady tracks: "
+                      << (t.batch_size > 0 ? t.batch_size : o.batch_size) << " x "
+                      << (t.iterations > 0 ? t.iterations : o.iterations) << "), backend "
+                      << (refiner_ ? refiner_->backend() : std::string("none")));
+}
+
+void RefinerNodelet::loadObjects() {
+  ros::NodeHandle& pnh = getPrivateNodeHandle();
+  const diffdope::PackageResolver resolver = [](const std::string& pkg) { return ros::package::getPath(pkg); };
+  diffdope::ObjectsConfig cfg;
+  try {
+    if (!settings_.error.empty()) throw std::invalid_argument(settings_.error);
+    if (settings_.objects_config.empty())
+      throw std::runtime_error("~objects_config is not set (path to the objects YAML)");
+    cfg = diffdope::load_objects_config(settings_.objects_config, resolver);
+    refiner_options_ = cfg.refiner;
+    // The optional refiner file overrides the objects file's refiner section (launch-time tuning).
+    if (!settings_.refiner_config.empty())
+      refiner_options_ = diffdope::RefinerOptions::from_yaml_file(settings_.refiner_config, cfg.refiner);
+    // Then the ~parameters of the runtime settings (cfg/Refiner.cfg: iterations, image_scale, loss weights...),
+    // checked as the YAML's are.
+    const RuntimeSettings launch_values{mode_, refiner_options_, track_options_, publish_implausible_};
+    RefinerConfig launch = to_config(launch_values);
+    launch.__fromServer__(pnh);
+    launch.mode = to_string(mode_);  // (read with the settings, with its own message)
+    const RuntimeSettings settings = from_config(launch, launch_values);
+    refiner_options_ = settings.refiner;
+    track_options_ = settings.track;
+    if (!settings_.device.empty()) refiner_options_.device = settings_.device;
+    refiner_options_.validate();
+    // One refiner (and renderer: CUDA keeps the meshes on the device) for the node's life; "cuda" without a
+    // device throws here, "auto" falls back to the CPU with one line.
+    refiner_ = std::make_unique<diffdope::Refiner>(refiner_options_);
+  } catch (const std::exception& e) {
+    errors_.error("config", std::string("configuration error, no object will be refined: ") + e.what());
+    return;
+  }
+  if (settings_.use_mask) {  // several objects reading "any nonzero pixel" would all get the union of their masks
+    int any = 0;
+    for (const auto& o : cfg.objects) any += o.mask_label < 0;
+    if (any > 1)
+      errors_.warn("mask_labels", "~use_mask with " + std::to_string(any) +
+                                      " objects without a mask_label: each gets every nonzero mask pixel; give "
+                                      "each object its label");
+  }
+  for (const diffdope::ObjectConfig& config : cfg.objects) {
+    auto slot = std::make_unique<Slot>();
+    slot->config = config;
+    try {
+      slot->mesh = std::make_unique<diffdope::Mesh>(diffdope::load_object_mesh(slot->config));
+      refiner_->prepare(*slot->mesh);  // its first detection then pays no set-up
+      // Detections within one diameter of an instance's last known centre are that instance's.
+      slot->tracks = std::make_unique<diffdope::InstanceTracks>(
+          slot->config.max_instances, track_options_, slot->mesh->center().cast<double>(), slot->mesh->diameter());
+      NODELET_INFO_STREAM("object '" << slot->config.name << "': " << slot->mesh->num_triangles() << " triangles, "
+                                     << "diameter " << format_fixed(slot->mesh->diameter()) << " m"
+                                     << (slot->config.max_instances > 1
+                                             ? ", up to " + std::to_string(slot->config.max_instances) + " instances"
+                                             : std::string()));
+    } catch (const std::exception& e) {
+      slot->mesh.reset();
+      slot->disabled_reason = e.what();
+      errors_.error("mesh_" + slot->config.name,
+                    "object '" + slot->config.name + "' disabled: cannot load its mesh: " + e.what());
+    }
+    for (int k = 0; k < slot->config.max_instances; ++k) {
+      Instance in;
+      in.name = diffdope::instance_name(slot->config, k);
+      in.pose_pub = pnh.advertise<geometry_msgs::PoseStamped>("refined/" + in.name, 10);
+      in.cov_pub = pnh.advertise<geometry_msgs::PoseWithCovarianceStamped>("refined_cov/" + in.name, 10);
+      slot->instances.push_back(in);
+    }
+    slots_.push_back(std::move(slot));
+  }
+}
+
+void RefinerNodelet::onFrame(std::shared_ptr<Frame> frame) {
+  {
+    std::lock_guard<std::mutex> lock(work_mutex_);
+    ++stats_.frames_synced;
+    if (frame_pending_) ++stats_.frames_skipped;  // the worker was busy: streaming takes the newest frame
+    latest_frame_ = std::move(frame);
+    frame_pending_ = mode_ != StreamMode::kOnRequest;
+  }
+  work_cv_.notify_one();
+}
+
+void RefinerNodelet::onWatchdog(const ros::WallTimerEvent&) {
+  if (inbox_) inbox_->resubscribeIfNeeded();
+  input_sync_.checkSynchronization();
+  // force_update: this timer already paces it (1 s of wall time). update() gates on ros::Time, which under sim
+  // time stops publishing after the clock jumps back (a looped bag) until it catches up again.
+  if (diagnostics_) diagnostics_->force_update();
+}
+
+RefinerNodelet::~RefinerNodelet() {
+  reconfigure_server_.reset();  // (its callback uses the members below)
+  {
+    std::lock_guard<std::mutex> lock(work_mutex_);
+    stop_ = true;
+    for (auto& r : requests_) {
+      diffdope_ros::Refine::Response res;
+      res.success = false;
+      res.message = "the refiner is shutting down";
+      r->response.set_value(res);
+    }
+    requests_.clear();
+  }
+  work_cv_.notify_all();
+  if (worker_.joinable()) worker_.join();
+  watchdog_timer_.stop();
+  if (service_spinner_) service_spinner_->stop();
+  refine_srv_.shutdown();
+  input_sync_.shutdown();
+  if (inbox_) inbox_->shutdown();
+  diagnostics_.reset();
+}
+
+}  // namespace diffdope_ros
+
+PLUGINLIB_EXPORT_CLASS(diffdope_ros::RefinerNodelet, nodelet::Nodelet)

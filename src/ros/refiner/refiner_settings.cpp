@@ -1,0 +1,83 @@
+// Reading and checking the refiner nodelet's ~parameters (refiner_settings.hpp).
+#include "diffdope_ros/refiner_settings.hpp"
+
+#include <ros/console.h>
+#include <ros/node_handle.h>
+
+#include <stdexcept>
+
+#include "base/option_range.hpp"
+#include "diffdope_ros/error_reporter.hpp"
+
+namespace diffdope_ros {
+
+void check_refiner_settings(RefinerSettings& s) {
+  try {
+    const diffdope::OptionRange check{"parameters"};
+    check("~queue_size", s.queue_size, 1, 1000, " messages");
+    check.above("~max_interval", s.max_interval, 0, 10, " seconds");
+    check("~sync_timeout", s.sync_timeout, 0, 3600, " seconds");
+    check("~tf_timeout", s.tf_timeout, 0, 60, " seconds");
+    check.above("~max_request_time", s.max_request_time, 0, 3600, " seconds");
+    check("~error_throttle", s.error_throttle, 0, 3600, " seconds");
+    s.track.validate();
+  } catch (const std::invalid_argument& e) {
+    s.error = e.what();
+    const RefinerSettings defaults;
+    s.queue_size = defaults.queue_size;
+    s.max_interval = defaults.max_interval;
+    s.sync_timeout = defaults.sync_timeout;
+    s.tf_timeout = defaults.tf_timeout;
+    s.max_request_time = defaults.max_request_time;
+  }
+}
+
+RefinerSettings load_refiner_settings(const ros::NodeHandle& pnh, const std::string& node_name,
+                                      ErrorReporter& errors) {
+  RefinerSettings s;
+  try {
+    s.mode = parse_stream_mode(pnh.param<std::string>("mode", "tracking"));
+  } catch (const std::invalid_argument& e) {
+    ROS_ERROR_STREAM_NAMED(node_name, "~" << e.what() << "; using tracking");
+    s.mode = StreamMode::kTracking;
+  }
+  s.use_depth = pnh.param("use_depth", s.use_depth);
+  s.use_mask = pnh.param("use_mask", s.use_mask);
+  s.queue_size = pnh.param("queue_size", s.queue_size);
+  s.max_interval = pnh.param("max_interval", s.max_interval);
+  s.sync_timeout = pnh.param("sync_timeout", s.sync_timeout);
+  s.tf_timeout = pnh.param("tf_timeout", s.tf_timeout);
+  s.max_request_time = pnh.param("max_request_time", s.max_request_time);
+  s.frame_prefix = pnh.param("frame_prefix", s.frame_prefix);
+  s.fixed_frame = pnh.param("fixed_frame", s.fixed_frame);
+  s.detection_prefix = pnh.param("detection_topic_prefix", s.detection_prefix);
+  s.detections_topic = pnh.param("detections_topic", s.detections_topic);
+  XmlRpc::XmlRpcValue ids;
+  if (pnh.getParam("class_ids", ids)) {
+    // DOPE's own layout: {object name: class id}.
+    if (ids.getType() != XmlRpc::XmlRpcValue::TypeStruct) {
+      errors.error("config", "~class_ids: expected a mapping of object names to DOPE class ids, e.g. {cracker: 1}");
+    } else {
+      for (auto& kv : ids) {
+        if (kv.second.getType() == XmlRpc::XmlRpcValue::TypeInt) s.class_ids[kv.first] = static_cast<int>(kv.second);
+        else errors.error("config", "~class_ids: the id of '" + kv.first + "' is not an integer: ignored");
+      }
+    }
+  }
+  s.publish_tf = pnh.param("publish_tf", s.publish_tf);
+  s.publish_implausible = pnh.param("publish_implausible", s.publish_implausible);
+  // on_request also seeds from its own previous results ("refine again" on a newer frame).
+  s.track.tracking = s.mode != StreamMode::kContinuous;
+  s.track.max_detection_age = pnh.param("max_detection_age", 1.0);
+  s.track.track_timeout = pnh.param("track_timeout", 3.0);
+  s.track.max_failures = pnh.param("max_track_failures", 2);
+  s.track.predict = pnh.param("predict_motion", true);
+  s.error_throttle = pnh.param("error_throttle", s.error_throttle);
+  s.objects_config = pnh.param<std::string>("objects_config", "");
+  s.refiner_config = pnh.param<std::string>("refiner_config", "");
+  s.device = pnh.param<std::string>("device", "");
+  check_refiner_settings(s);
+  return s;
+}
+
+}  // namespace diffdope_ros

@@ -1,0 +1,136 @@
+// RefinerNodelet's worker thread: takes ~refine calls first, else the newest frame; applies reconfigured values
+// between jobs; refines streamed frames from their detections and tracks.
+#include "ros/refiner/refiner_nodelet.hpp"
+
+#include "diffdope_ros/conversions.hpp"
+
+namespace diffdope_ros {
+
+void convert_frame(Frame& frame) {
+  frame.observation.rgb = rgb_from_image(*frame.rgb_msg);
+  if (frame.depth_msg) frame.observation.depth = depth_from_image(*frame.depth_msg);
+  if (frame.mask_msg) frame.labels = labels_from_image(*frame.mask_msg);
+  frame.converted = true;
+}
+
+void RefinerNodelet::workerLoop() {
+  while (true) {
+    std::shared_ptr<Request> job;
+    std::shared_ptr<Frame> frame;
+    {
+      std::unique_lock<std::mutex> lock(work_mutex_);
+      work_cv_.wait(lock, [this] { return stop_ || !requests_.empty() || frame_pending_; });
+      if (stop_) return;
+      frame = latest_frame_;
+      if (!requests_.empty()) {  // service calls first: a caller is waiting
+        job = requests_.front();
+        requests_.pop_front();
+      } else {
+        frame_pending_ = false;
+      }
+    }
+    applyPendingSettings();
+    auto answer_failure = [&job](const std::string& why) {  // never leave a caller waiting
+      if (!job) return;
+      diffdope_ros::Refine::Response res;
+      res.success = false;
+      res.message = why;
+      try {
+        job->response.set_value(res);
+      } catch (const std::future_error&) {  // already answered
+      }
+    };
+    if (frame && !frame->converted) {
+      try {
+        convert_frame(*frame);
+      } catch (const std::exception& e) {
+        report_input_error(errors_, e);
+        answer_failure(std::string("the latest frame is unusable: ") + e.what());
+        continue;
+      }
+    }
+    if (job) {  // streaming is paused until the call is answered (diagnostics say so)
+      std::lock_guard<std::mutex> lock(work_mutex_);
+      stats_.serving_since = ros::WallTime::now();
+    }
+    try {
+      if (job) {
+        const diffdope_ros::Refine::Response res = processRequest(job->request, frame);
+        job->response.set_value(res);
+        std::lock_guard<std::mutex> lock(work_mutex_);
+        ++(res.success ? stats_.requests_succeeded : stats_.requests_failed);
+        if (latest_frame_ == frame) frame_pending_ = false;  // that frame is done: do not stream it again
+      } else {
+        processStreaming(frame);
+      }
+    } catch (const std::exception& e) {  // a bug guard: the node keeps running and says why
+      errors_.error("internal", std::string("refinement failed: ") + e.what());
+      answer_failure(std::string("refinement failed: ") + e.what());
+    } catch (...) {  // not a std::exception: still never take the node down
+      errors_.error("internal", "refinement failed with an unknown exception");
+      answer_failure("refinement failed with an unknown exception");
+    }
+    if (job) {
+      std::lock_guard<std::mutex> lock(work_mutex_);
+      stats_.serving_since = ros::WallTime();
+    }
+  }
+}
+
+void RefinerNodelet::applyPendingSettings() {
+  std::optional<RuntimeSettings> settings;
+  {
+    std::lock_guard<std::mutex> lock(work_mutex_);
+    settings.swap(pending_settings_);
+  }
+  if (!settings) return;
+  try {
+    settings->refiner.validate();  // (the refiner takes them per call, with the frame)
+    for (auto& slot : slots_)
+      if (slot->tracks) slot->tracks->set_options(settings->track);
+  } catch (const std::invalid_argument& e) {  // (checked by the callback already: a bug guard)
+    errors_.error("reconfigure", std::string("reconfigured values not applied: ") + e.what());
+    try {  // back to the values in force (valid: they were accepted before)
+      for (auto& slot : slots_)
+        if (slot->tracks) slot->tracks->set_options(track_options_);
+    } catch (const std::exception&) {
+    }
+    return;
+  }
+  refiner_options_ = settings->refiner;
+  track_options_ = settings->track;
+  publish_implausible_ = settings->publish_implausible;
+}
+
+std::vector<TargetObject> RefinerNodelet::targetObjects() const {
+  std::vector<TargetObject> objects;
+  for (const auto& slot : slots_)
+    objects.push_back({slot->config.name, slot->config.max_instances, slot->disabled_reason, slot->tracks.get()});
+  return objects;
+}
+
+void RefinerNodelet::processStreaming(const std::shared_ptr<const Frame>& frame) {
+  if (!frame) return;
+  resetOnTimeJump(*frame);
+  absorbDetections(*frame);
+  const double stamp = frame->header.stamp.toSec();
+  const StreamingTargets targets = streaming_targets(targetObjects(), stamp);
+  // Every object on a steady track: the tracking budget (~track_batch_size x ~track_iterations).
+  std::vector<std::string> skipped;
+  if (!targets.seeds.empty())
+    refineAndPublish(*frame, targets.seeds,
+                     targets.all_steady ? diffdope::tracked_options(refiner_options_, track_options_)
+                                        : refiner_options_,
+                     &skipped);
+  updateTrackingFlags(stamp);
+}
+
+void RefinerNodelet::updateTrackingFlags(double stamp) {
+  for (auto& slot : slots_) {
+    int n = 0;
+    for (int k = 0; slot->tracks && k < slot->tracks->size(); ++k) n += slot->tracks->track(k).tracking(stamp);
+    slot->tracking = n;
+  }
+}
+
+}  // namespace diffdope_ros
