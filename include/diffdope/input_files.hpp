@@ -2,11 +2,16 @@
 // The small input files a user hands to the tools: camera intrinsics and an initial pose (JSON / YAML). Every
 // problem is an InputFileError naming the file and saying what is wrong, e.g.
 //   camera.json: 'cam_K' needs 9 values, found 6
+#include <nlohmann/json.hpp>
 #include <stdexcept>
 #include <string>
 
 #include "diffdope/camera.hpp"
 #include "diffdope/pose.hpp"
+
+namespace YAML {
+class Node;
+}
 
 namespace diffdope {
 
@@ -24,10 +29,21 @@ long long parse_integer_arg(const std::string& flag, const std::string& text, lo
 /// caller's.
 double parse_number_arg(const std::string& flag, const std::string& text);
 
-/// The whole file as text; std::runtime_error "<path>: cannot open <what>" when it cannot be read.
+/// The whole file as text; std::runtime_error "<path>: cannot open <what>: ..." when it is missing, not a regular
+/// file (a pipe or device could block forever) or unreadable, and when it exceeds input_limits::kMaxTextFileBytes.
 std::string read_text_file(const std::string& path, const std::string& what);
 
-/// Throws InputFileError unless `path` is a regular file that can be opened for reading.
+/// Throws InputFileError naming `origin` when the YAML document `root` nests deeper than input_limits::kMaxNesting
+/// or expands to more than input_limits::kMaxYamlNodes values, aliases counted at each use (a "billion laughs"
+/// of a few hundred bytes): call it before walking a user's YAML.
+void check_yaml_expansion(const YAML::Node& root, const std::string& origin);
+
+/// Parses JSON `text` read from `path`; InputFileError naming the file when it is invalid or nested deeper than
+/// input_limits::kMaxNesting.
+nlohmann::json parse_json_checked(const std::string& text, const std::string& path);
+
+/// Throws InputFileError unless `path` is a regular file that can be opened for reading; pipes (FIFOs, a shell's
+/// <(...)), devices and sockets are refused before they are opened.
 void check_input_file(const std::string& path);
 
 /// Intrinsics from .json or .yaml/.yml: fx, fy, cx, cy[, width, height] (ROS: image_width, image_height), or a

@@ -42,7 +42,8 @@ cv::Mat observed_edges(const cv::Mat& rgb_float, double low = 50, double high = 
 /// log(grey + epsilon), grey = the mean of the channels (as the renderer's grey), CV_32FC2.
 cv::Mat observed_texture(const cv::Mat& rgb_float, double epsilon);
 
-/// Converts a colour image: 8UC3 / 16UC3 / 32FC3 (assumed RGB unless `bgr`), 8UC1 / 32FC1 grey.
+/// Converts a colour image: 8UC3 / 16UC3 / 32FC3 (assumed RGB unless `bgr`), 8UC1 / 32FC1 grey. Float images
+/// must be finite and in [0, 1] (1 % of slack, clamped); std::invalid_argument naming `what` otherwise.
 cv::Mat to_rgb_float(const cv::Mat& image, bool bgr, const std::string& what = "rgb");
 /// Converts depth: 16UC1 (units of `metres_per_unit`, e.g. 0.001 for millimetres) or 32FC1 (metres, scaled
 /// by metres_per_unit too). Non-positive and non-finite readings become 0 (no reading).

@@ -1,6 +1,8 @@
 // Camera and initial-pose files (include/diffdope/input_files.hpp).
 #include "diffdope/input_files.hpp"
 
+#include "diffdope/input_limits.hpp"
+
 #include <yaml-cpp/yaml.h>
 
 #include <algorithm>
@@ -19,14 +21,14 @@ namespace {
 namespace fs = std::filesystem;
 using json = nlohmann::json;
 
-constexpr int kMaxNesting = 64;  // (a pathological file must not exhaust the stack)
+using input_limits::kMaxNesting;
 
 [[noreturn]] void fail(const std::string& file, const std::string& what) { throw InputFileError(file, what); }
 
 void check_file(const std::string& path) {
   check_input_file(path);
   std::error_code ec;
-  if (fs::file_size(path, ec) > (size_t(64) << 20)) fail(path, "more than 64 MB: not a camera or pose file");
+  if (fs::file_size(path, ec) > input_limits::kMaxTextFileBytes) fail(path, "more than 64 MB: not a camera or pose file");
 }
 
 std::string lower(std::string s) {
@@ -43,11 +45,17 @@ std::string shown(const json& v) {
 
 std::string size_str(int w, int h) { return std::to_string(w) + "x" + std::to_string(h); }
 
-json read_json_file(const std::string& path) {
-  check_file(path);
-  std::ifstream in(path);
+}  // namespace
+
+nlohmann::json parse_json_checked(const std::string& text, const std::string& path) {
+  // The depth is checked while parsing: a deeper document is refused before it is built (and before a message
+  // would print it recursively).
+  const json::parser_callback_t limit_depth = [&](int depth, json::parse_event_t, json&) {
+    if (depth > kMaxNesting) fail(path, "nested deeper than " + std::to_string(kMaxNesting) + " levels");
+    return true;
+  };
   try {
-    return json::parse(in);
+    return json::parse(text, limit_depth);
   } catch (const json::exception& e) {
     std::string m = e.what();
     const size_t b = m.find("] ");
@@ -56,17 +64,46 @@ json read_json_file(const std::string& path) {
   }
 }
 
-json yaml_to_json(const YAML::Node& n, const std::string& path, int depth = 0) {
+namespace {
+
+json read_json_file(const std::string& path) {
+  check_file(path);
+  std::ifstream in(path);
+  std::stringstream text;
+  text << in.rdbuf();
+  return parse_json_checked(text.str(), path);
+}
+
+void count_yaml_nodes(const YAML::Node& n, const std::string& origin, long long& nodes, int depth) {
+  if (depth > kMaxNesting) fail(origin, "nested deeper than " + std::to_string(kMaxNesting) + " levels");
+  if (--nodes < 0)
+    fail(origin, "expands to more than " + std::to_string(input_limits::kMaxYamlNodes) +
+                     " values (aliases counted each time they are used)");
+  if (n.IsMap()) {
+    for (const auto& kv : n) {
+      count_yaml_nodes(kv.first, origin, nodes, depth + 1);
+      count_yaml_nodes(kv.second, origin, nodes, depth + 1);
+    }
+  } else if (n.IsSequence()) {
+    for (const auto& e : n) count_yaml_nodes(e, origin, nodes, depth + 1);
+  }
+}
+
+/// `nodes`: what the file may still expand to (an alias is expanded each time it is used).
+json yaml_to_json(const YAML::Node& n, const std::string& path, long long& nodes, int depth = 0) {
   if (depth > kMaxNesting) fail(path, "nested deeper than " + std::to_string(kMaxNesting) + " levels");
+  if (--nodes < 0)
+    fail(path, "expands to more than " + std::to_string(input_limits::kMaxYamlNodes) +
+                   " values (aliases counted each time they are used): not a camera file");
   switch (n.Type()) {
     case YAML::NodeType::Map: {
       json j = json::object();
-      for (const auto& kv : n) j[kv.first.as<std::string>()] = yaml_to_json(kv.second, path, depth + 1);
+      for (const auto& kv : n) j[kv.first.as<std::string>()] = yaml_to_json(kv.second, path, nodes, depth + 1);
       return j;
     }
     case YAML::NodeType::Sequence: {
       json j = json::array();
-      for (const auto& e : n) j.push_back(yaml_to_json(e, path, depth + 1));
+      for (const auto& e : n) j.push_back(yaml_to_json(e, path, nodes, depth + 1));
       return j;
     }
     case YAML::NodeType::Scalar: {
@@ -84,7 +121,8 @@ json yaml_to_json(const YAML::Node& n, const std::string& path, int depth = 0) {
 json read_yaml_file(const std::string& path) {
   check_file(path);
   try {
-    return yaml_to_json(YAML::LoadFile(path), path);
+    long long nodes = input_limits::kMaxYamlNodes;
+    return yaml_to_json(YAML::LoadFile(path), path, nodes);
   } catch (const YAML::Exception& e) {
     fail(path, std::string("invalid YAML: ") + e.what());
   }
@@ -158,7 +196,21 @@ double parse_number_arg(const std::string& flag, const std::string& text) {
   return x;
 }
 
+void check_yaml_expansion(const YAML::Node& root, const std::string& origin) {
+  long long nodes = input_limits::kMaxYamlNodes;
+  count_yaml_nodes(root, origin, nodes, 0);
+}
+
 std::string read_text_file(const std::string& path, const std::string& what) {
+  try {
+    check_input_file(path);
+  } catch (const InputFileError& e) {
+    throw std::runtime_error(path + ": cannot open " + what + ": " + e.what());
+  }
+  std::error_code ec;
+  if (fs::file_size(path, ec) > input_limits::kMaxTextFileBytes)
+    throw std::runtime_error(path + ": more than " + std::to_string(input_limits::kMaxTextFileBytes >> 20) +
+                             " MB: not " + what);
   std::ifstream in(path);
   if (!in) throw std::runtime_error(path + ": cannot open " + what);
   std::stringstream ss;
@@ -168,8 +220,17 @@ std::string read_text_file(const std::string& path, const std::string& what) {
 
 void check_input_file(const std::string& path) {
   std::error_code ec;
-  if (!fs::exists(path, ec)) fail(path, "file does not exist");
-  if (fs::is_directory(path, ec)) fail(path, "is a directory, expected a file");
+  const fs::file_status st = fs::status(path, ec);  // (follows links: /dev/fd/N of a shell's <(...) is a pipe)
+  if (!fs::exists(st)) fail(path, "file does not exist");
+  if (fs::is_directory(st)) fail(path, "is a directory, expected a file");
+  if (!fs::is_regular_file(st)) {
+    const char* kind = fs::is_fifo(st)                                          ? "a pipe (FIFO)"
+                       : fs::is_character_file(st) || fs::is_block_file(st) ? "a device"
+                       : fs::is_socket(st)                                      ? "a socket"
+                                                                                : "not a file";
+    fail(path, std::string("is ") + kind + ", not a regular file: refused, since reading it may never end "
+                                           "(write it to a file first)");
+  }
   std::ifstream probe(path, std::ios::binary);
   if (!probe) fail(path, "cannot open the file for reading");
 }

@@ -99,6 +99,9 @@ cv::Mat observed_texture(const cv::Mat& rgb_float, double epsilon) {
   return out;
 }
 
+/// How far outside [0, 1] a float colour image may stray (rounding of a conversion) before it is refused.
+constexpr double kFloatColourSlack = 0.01;
+
 cv::Mat to_rgb_float(const cv::Mat& image, bool bgr, const std::string& what) {
   if (image.empty()) throw std::invalid_argument(what + ": empty image");
   cv::Mat f;
@@ -109,7 +112,20 @@ cv::Mat to_rgb_float(const cv::Mat& image, bool bgr, const std::string& what) {
   else if (depth != CV_32F && depth != CV_64F)
     throw std::invalid_argument(what + ": unsupported image type " + cv::typeToString(image.type()) +
                                 " (expected 8-bit, 16-bit or float)");
+  if (depth == CV_32F || depth == CV_64F) {
+    // Float colour is [0, 1] by convention; a value far outside (or NaN) is a wrong image or unit, not light, and
+    // would drag the pose anywhere. Rounding slightly beyond the range is clamped.
+    cv::Mat flat = image.reshape(1);
+    if (!cv::checkRange(flat))
+      throw std::invalid_argument(what + ": the float image holds values that are not finite");
+    double lo = 0, hi = 0;
+    cv::minMaxLoc(flat, &lo, &hi);
+    if (lo < -kFloatColourSlack || hi > 1.0 + kFloatColourSlack)
+      throw std::invalid_argument(what + ": a float colour image must lie in [0, 1]; this one spans [" +
+                                  std::to_string(lo) + ", " + std::to_string(hi) + "]");
+  }
   image.convertTo(f, CV_MAKETYPE(CV_32F, image.channels()), scale);
+  if (depth == CV_32F || depth == CV_64F) cv::min(cv::max(f, 0.0), 1.0, f);
   cv::Mat out;
   switch (image.channels()) {
     case 1: cv::cvtColor(f, out, cv::COLOR_GRAY2RGB); break;

@@ -1,9 +1,14 @@
 #include "diffdope/bop.hpp"
 
+#include "diffdope/image_file.hpp"
+#include "diffdope/input_files.hpp"
+#include "diffdope/input_limits.hpp"
+
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <nlohmann/json.hpp>
 #include <opencv2/imgcodecs.hpp>
 #include <stdexcept>
@@ -15,12 +20,10 @@ using nlohmann::json;
 namespace {
 
 json read_json(const std::string& path) {
-  std::ifstream f(path);
-  if (!f) throw std::runtime_error(path + ": cannot open");
   try {
-    return json::parse(f);
-  } catch (const json::exception& e) {
-    throw std::runtime_error(path + ": invalid JSON (" + e.what() + ")");
+    return parse_json_checked(read_text_file(path, "a BOP JSON file"), path);
+  } catch (const InputFileError& e) {
+    throw std::runtime_error(path + ": " + e.what());
   }
 }
 
@@ -51,13 +54,19 @@ Pose pose_mm(const json& e, const std::string& where) {
 int object_id(const json& e, const std::string& where) {
   if (!e.is_object() || !e.contains("obj_id") || !e["obj_id"].is_number_integer())
     throw std::runtime_error(where + ": an entry without an integer obj_id");
-  return e["obj_id"].get<int>();
+  const long long id = e["obj_id"].get<long long>();
+  if (id < 0 || id > std::numeric_limits<int>::max())
+    throw std::runtime_error(where + ": obj_id " + std::to_string(id) + " is outside [0, " +
+                             std::to_string(std::numeric_limits<int>::max()) + "]");
+  return int(id);
 }
 
-cv::Mat imread_checked(const std::string& path, int flags) {
-  cv::Mat m = cv::imread(path, flags);
-  if (m.empty()) throw std::runtime_error(path + ": missing or unreadable image");
-  return m;
+cv::Mat imread_checked(const std::string& path, int flags, const std::string& kind) {
+  try {
+    return read_image_file(path, flags, kind, input_limits::kMaxImagePixels);
+  } catch (const InputFileError& e) {
+    throw std::runtime_error(path + ": " + e.what());
+  }
 }
 
 /// A numeric array of `n` finite numbers at j[key] (or j itself when key is empty).
@@ -170,8 +179,13 @@ BopImage BopDataset::image(int scene_id, int im_id) const {
     throw std::runtime_error(dir + "/scene_camera.json: depth_scale must be a positive number");
   char name[32];
   std::snprintf(name, sizeof name, "%06d.png", im_id);
-  cv::Mat rgb = imread_checked(dir + "/rgb/" + name, cv::IMREAD_COLOR);
+  cv::Mat rgb = imread_checked(dir + "/rgb/" + name, cv::IMREAD_COLOR, "rgb");
   img.camera = Camera(K[0], K[4], K[2], K[5], rgb.cols, rgb.rows);
+  try {
+    img.camera.validate();
+  } catch (const std::exception& e) {
+    throw std::runtime_error(dir + "/scene_camera.json (image " + key + "): cam_K: " + e.what());
+  }
   const json gts = read_json(dir + "/scene_gt.json");
   if (gts.is_object() && gts.contains(key)) {
     if (!gts[key].is_array()) throw std::runtime_error(dir + "/scene_gt.json: image " + key + " is not a list");
@@ -193,12 +207,17 @@ Observation BopDataset::observation(const BopImage& img, int inst) const {
   std::snprintf(name, sizeof name, "%06d.png", img.im_id);
   std::snprintf(mname, sizeof mname, "%06d_%06d.png", img.im_id, inst);
   Observation o;
-  o.rgb = to_rgb_float(imread_checked(dir + "/rgb/" + name, cv::IMREAD_COLOR), true, dir + "/rgb/" + name);
+  o.rgb = to_rgb_float(imread_checked(dir + "/rgb/" + name, cv::IMREAD_COLOR, "rgb"), true, dir + "/rgb/" + name);
   const std::string dpath = dir + "/depth/" + name;
-  if (fs::exists(dpath)) o.depth = to_depth_metres(imread_checked(dpath, cv::IMREAD_ANYDEPTH), 0.001 * img.depth_scale, dpath);
+  if (fs::exists(dpath)) o.depth = to_depth_metres(imread_checked(dpath, cv::IMREAD_ANYDEPTH, "depth"), 0.001 * img.depth_scale, dpath);
   const std::string mpath = dir + "/mask_visib/" + mname;
-  if (fs::exists(mpath)) o.mask = to_mask_float(imread_checked(mpath, cv::IMREAD_GRAYSCALE), mpath);
-  o.validate(img.camera);
+  if (fs::exists(mpath)) o.mask = to_mask_float(imread_checked(mpath, cv::IMREAD_GRAYSCALE, "mask"), mpath);
+  try {
+    o.validate(img.camera);
+  } catch (const std::exception& e) {
+    throw std::runtime_error(dir + " (image " + std::to_string(img.im_id) + ", instance " + std::to_string(inst) +
+                             "): " + e.what());
+  }
   return o;
 }
 

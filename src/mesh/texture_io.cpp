@@ -16,6 +16,8 @@
 
 #include "mesh/mesh_io_internal.hpp"
 
+#include "diffdope/image_file.hpp"
+
 namespace diffdope {
 namespace mesh_io {
 
@@ -57,49 +59,6 @@ bool to_texture(const cv::Mat& in, Texture* tex) {
 }
 
 constexpr int kImreadFlags = cv::IMREAD_ANYDEPTH | cv::IMREAD_COLOR | cv::IMREAD_IGNORE_ORIENTATION;
-
-uint32_t be32(const unsigned char* p) { return uint32_t(p[0]) << 24 | uint32_t(p[1]) << 16 | uint32_t(p[2]) << 8 | p[3]; }
-
-/// Width and height from a PNG, JPEG or BMP header, without decoding; false for other formats.
-bool image_header_size(const std::string& bytes, long long* w, long long* h) {
-  const auto* b = reinterpret_cast<const unsigned char*>(bytes.data());
-  const size_t n = bytes.size();
-  if (n >= 24 && std::memcmp(b, "\x89PNG\r\n\x1a\n", 8) == 0 && std::memcmp(b + 12, "IHDR", 4) == 0) {
-    *w = be32(b + 16), *h = be32(b + 20);
-    return true;
-  }
-  if (n >= 26 && b[0] == 'B' && b[1] == 'M') {
-    int32_t bw, bh;
-    std::memcpy(&bw, b + 18, 4), std::memcpy(&bh, b + 22, 4);
-    *w = std::llabs(bw), *h = std::llabs(bh);
-    return true;
-  }
-  if (n >= 4 && b[0] == 0xFF && b[1] == 0xD8) {  // JPEG: walk the segments to a start-of-frame
-    size_t i = 2;
-    while (i + 4 <= n) {
-      if (b[i] != 0xFF) return false;
-      const unsigned char marker = b[i + 1];
-      if (marker == 0xFF) {  // fill byte
-        ++i;
-        continue;
-      }
-      if (marker == 0xD8 || marker == 0x01 || (marker >= 0xD0 && marker <= 0xD7)) {  // no length
-        i += 2;
-        continue;
-      }
-      const size_t len = size_t(b[i + 2]) << 8 | b[i + 3];
-      if (marker >= 0xC0 && marker <= 0xCF && marker != 0xC4 && marker != 0xC8 && marker != 0xCC) {
-        if (i + 9 > n) return false;
-        *h = (static_cast<long long>(b[i + 5]) << 8) | b[i + 6];
-        *w = (static_cast<long long>(b[i + 7]) << 8) | b[i + 8];
-        return true;
-      }
-      if (len < 2) return false;
-      i += 2 + len;
-    }
-  }
-  return false;
-}
 
 }  // namespace
 

@@ -14,6 +14,8 @@
 #include "diffdope/option_table.hpp"
 #include "diffdope/refiner.hpp"
 
+#include "diffdope/input_files.hpp"
+
 namespace diffdope {
 namespace {
 
@@ -91,15 +93,7 @@ RefinerOptions parse(const YAML::Node& root, RefinerOptions o, const std::string
 }  // namespace
 
 RefinerOptions RefinerOptions::from_yaml_file(const std::string& path, const RefinerOptions& base) {
-  YAML::Node root;
-  try {
-    root = YAML::LoadFile(path);
-  } catch (const YAML::BadFile&) {
-    throw std::runtime_error(path + ": cannot read the file");
-  } catch (const YAML::Exception& e) {
-    throw std::runtime_error(path + ": " + e.what());
-  }
-  return parse(root, base, path);
+  return from_yaml_string(read_text_file(path, "the options file"), base, path);
 }
 
 RefinerOptions RefinerOptions::from_yaml_string(const std::string& yaml, const RefinerOptions& base,
@@ -108,6 +102,11 @@ RefinerOptions RefinerOptions::from_yaml_string(const std::string& yaml, const R
   try {
     root = YAML::Load(yaml);
   } catch (const YAML::Exception& e) {
+    throw std::runtime_error(origin + ": " + e.what());
+  }
+  try {
+    check_yaml_expansion(root, origin);
+  } catch (const InputFileError& e) {
     throw std::runtime_error(origin + ": " + e.what());
   }
   return parse(root, base, origin);

@@ -6,10 +6,12 @@
 #include <cstdio>
 #include <filesystem>
 #include <iostream>
+#include <limits>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 #include <string>
 
+#include "diffdope/input_files.hpp"
 #include "diffdope/metrics.hpp"
 #include "diffdope/procedural.hpp"
 #include "diffdope/refiner.hpp"
@@ -29,6 +31,16 @@ void draw_outline(cv::Mat& bgr8, const cv::Mat& coverage, const cv::Scalar& colo
   cv::drawContours(bgr8, contours, -1, colour, 1, cv::LINE_AA);
 }
 
+/// A whole number in [lo, hi] for `flag`; a usage error (exit 2) naming the flag otherwise.
+long long integer_arg(const std::string& flag, const std::string& text, long long lo, long long hi) {
+  try {
+    return parse_integer_arg(flag, text, lo, hi);
+  } catch (const std::invalid_argument& e) {
+    std::cerr << "diffdope_demo: " << e.what() << "\n";
+    std::exit(2);
+  }
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -45,10 +57,10 @@ int main(int argc, char** argv) {
       return argv[++i];
     };
     if (a == "--level") level = value();
-    else if (a == "--scenes") scenes = std::stoi(value());
+    else if (a == "--scenes") scenes = int(integer_arg(a, value(), 1, 1000));
     else if (a == "--config") config = value();
     else if (a == "--out") out_dir = value();
-    else if (a == "--seed") seed = std::stoull(value());
+    else if (a == "--seed") seed = uint64_t(integer_arg(a, value(), 0, std::numeric_limits<long long>::max()));
     else if (a == "-h" || a == "--help") return usage(), 0;
     else return usage(), 2;
   }

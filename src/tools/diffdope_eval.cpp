@@ -65,7 +65,9 @@ double median(std::vector<double> v) {
   return v[v.size() / 2];
 }
 
-void write_perturbations(BopDataset& data, const std::string& dir, int samples, uint64_t seed) {
+/// Returns the scenes it skipped (each reported): their images or camera cannot be used.
+int write_perturbations(BopDataset& data, const std::string& dir, int samples, uint64_t seed) {
+  int skipped = 0;
   std::mt19937_64 rng(seed);
   const struct {
     const char* file;
@@ -76,7 +78,14 @@ void write_perturbations(BopDataset& data, const std::string& dir, int samples, 
   for (int scene : data.scene_ids()) {
     char sname[16];
     std::snprintf(sname, sizeof sname, "%06d", scene);
-    const BopImage img = data.image(scene, 0);
+    BopImage img;
+    try {
+      img = data.image(scene, 0);
+    } catch (const std::exception& e) {
+      std::cerr << "diffdope_eval: " << e.what() << "; scene " << scene << " skipped\n";
+      ++skipped;
+      continue;
+    }
     fs::create_directories(fs::path(dir) / sname);
     for (const auto& l : levels) {
       nlohmann::json j = nlohmann::json::object();
@@ -98,6 +107,7 @@ void write_perturbations(BopDataset& data, const std::string& dir, int samples, 
       f << j.dump(1) << "\n";
     }
   }
+  return skipped;
 }
 
 }  // namespace
@@ -160,14 +170,14 @@ int main(int argc, char** argv) {
     }
     BopDataset data(root, split, symmetric_arg.empty() ? nullptr : &symmetric_ids);
     if (!fs::is_directory(pert_dir) && generate == 0) throw std::runtime_error(pert_dir + ": not a directory");
-    if (generate > 0) write_perturbations(data, pert_dir, generate, seed);
+    int skipped = 0, skipped_scenes = 0, skipped_files = 0, perturbation_files = 0;
+    if (generate > 0) skipped_scenes += write_perturbations(data, pert_dir, generate, seed);
     std::ofstream out(out_path);
     if (!out) throw std::runtime_error(out_path + ": cannot write");
 
     std::map<std::string, LevelStats> stats;
     std::map<int, std::map<std::string, LevelStats>> object_stats;  // by obj_id, then level
     VerdictTally verdicts;
-    int skipped = 0, perturbation_files = 0;
     std::vector<std::string> level_order;
     for (int scene : data.scene_ids()) {
       char sname[16];
@@ -178,14 +188,30 @@ int main(int argc, char** argv) {
       for (const auto& e : fs::directory_iterator(pdir))
         if (e.path().extension() == ".json") files.push_back(e.path());
       std::sort(files.begin(), files.end());
-      const BopImage img = data.image(scene, 0);
+      // A scene or a file that cannot be used is reported and skipped; the rest are still scored.
+      BopImage img;
+      try {
+        img = data.image(scene, 0);
+      } catch (const std::exception& e) {
+        std::cerr << "\ndiffdope_eval: " << e.what() << "; scene " << scene << " skipped\n";
+        ++skipped_scenes;
+        continue;
+      }
       for (const fs::path& file : files) {
         const std::string level = perturbation_level(file.string());
         if (!levels.empty() && !levels.count(level)) continue;
         ++perturbation_files;
         if (!stats.count(level)) level_order.push_back(level);
         LevelStats& st = stats[level];
-        for (const Perturbation& p : read_perturbations(file.string())) {
+        std::vector<Perturbation> perturbations;
+        try {
+          perturbations = read_perturbations(file.string());
+        } catch (const std::exception& e) {
+          std::cerr << "\ndiffdope_eval: " << e.what() << "; skipped\n";
+          ++skipped_files;
+          continue;
+        }
+        for (const Perturbation& p : perturbations) {
           if (max_samples >= 0 && p.sample >= max_samples) continue;
           const BopInstance* gt = nullptr;
           int k = 0;
@@ -203,8 +229,18 @@ int main(int argc, char** argv) {
             ++skipped;
             continue;
           }
-          const Mesh& mesh = data.model(p.obj_id);
-          const Observation obs = data.observation(img, gt->inst);
+          const Mesh* mesh_ptr = nullptr;
+          Observation obs;
+          try {
+            mesh_ptr = &data.model(p.obj_id);
+            obs = data.observation(img, gt->inst);
+          } catch (const std::exception& e) {
+            std::cerr << "\ndiffdope_eval: " << file.string() << " sample " << p.sample << ": " << e.what()
+                      << "; skipped\n";
+            ++skipped;
+            continue;
+          }
+          const Mesh& mesh = *mesh_ptr;
           const RefineResult r = refiner.refine(img.camera, obs, mesh, p.pose);
           if (!r.error.empty()) {
             std::cerr << "\ndiffdope_eval: " << file.string() << " sample " << p.sample << ": obj " << p.obj_id
@@ -303,6 +339,9 @@ int main(int argc, char** argv) {
     summary["verdict"] = {{"over_10mm", verdicts.far}, {"over_10mm_rejected", verdicts.rejected_far},
                           {"under_5mm", verdicts.near}, {"under_5mm_rejected", verdicts.rejected_near}};
     if (!summary_path.empty()) std::ofstream(summary_path) << summary.dump(2) << "\n";
+    if (all_ref.empty() && (skipped_scenes > 0 || skipped_files > 0))
+      throw std::runtime_error("nothing was evaluated: " + std::to_string(skipped_scenes) + " scene(s) and " +
+                               std::to_string(skipped_files) + " perturbation file(s) could not be used (see above)");
     if (all_ref.empty())
       throw std::runtime_error("nothing was evaluated: " +
                                (perturbation_files == 0 ? "no perturbation files (" + pert_dir +
@@ -310,9 +349,11 @@ int main(int argc, char** argv) {
                                                               root + "/" + split +
                                                               (levels.empty() ? std::string() : " at the levels asked for")
                                                         : std::to_string(skipped) + " samples, all skipped"));
-    if (skipped > 0) {
-      std::cerr << "diffdope_eval: " << skipped << " of " << skipped + all_ref.size()
-                << " samples were skipped (see above); the figures leave them out\n";
+    if (skipped > 0 || skipped_scenes > 0 || skipped_files > 0) {
+      std::cerr << "diffdope_eval: " << skipped << " of " << skipped + all_ref.size() << " samples were skipped";
+      if (skipped_scenes > 0 || skipped_files > 0)
+        std::cerr << ", and " << skipped_scenes << " scene(s) and " << skipped_files << " perturbation file(s)";
+      std::cerr << " (see above); the figures leave them out\n";
       return 1;
     }
   } catch (const std::exception& e) {

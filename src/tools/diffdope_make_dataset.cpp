@@ -11,8 +11,10 @@
 #include <nlohmann/json.hpp>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
+#include <limits>
 #include <random>
 
+#include "diffdope/input_files.hpp"
 #include "diffdope/procedural.hpp"
 #include "diffdope/synthetic.hpp"
 
@@ -50,18 +52,23 @@ int main(int argc, char** argv) {
   std::string out, split = "test";
   int scenes = 6, width = 640, height = 480;
   uint64_t seed = 1;
-  for (int i = 1; i < argc; ++i) {
-    const std::string a = argv[i];
-    if (a == "-h" || a == "--help") return usage(0);
-    if (i + 1 >= argc) return usage(2);
-    const std::string v = argv[++i];
-    if (a == "--out") out = v;
-    else if (a == "--scenes") scenes = std::stoi(v);
-    else if (a == "--seed") seed = std::stoull(v);
-    else if (a == "--width") width = std::stoi(v);
-    else if (a == "--height") height = std::stoi(v);
-    else if (a == "--split") split = v;
-    else return usage(2);
+  try {
+    for (int i = 1; i < argc; ++i) {
+      const std::string a = argv[i];
+      if (a == "-h" || a == "--help") return usage(0);
+      if (i + 1 >= argc) return usage(2);
+      const std::string v = argv[++i];
+      if (a == "--out") out = v;
+      else if (a == "--scenes") scenes = int(parse_integer_arg(a, v, 1, 100000));
+      else if (a == "--seed") seed = uint64_t(parse_integer_arg(a, v, 0, std::numeric_limits<long long>::max()));
+      else if (a == "--width") width = int(parse_integer_arg(a, v, 16, 16384));
+      else if (a == "--height") height = int(parse_integer_arg(a, v, 16, 16384));
+      else if (a == "--split") split = v;
+      else return usage(2);
+    }
+  } catch (const std::invalid_argument& e) {
+    std::cerr << "diffdope_make_dataset: " << e.what() << "\n";
+    return 2;
   }
   if (out.empty() || scenes < 1 || width < 16 || height < 16) return usage(2);
   try {

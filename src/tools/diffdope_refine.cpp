@@ -40,7 +40,7 @@ const char* kUsage =
     "                       [--device auto|cpu|cuda] [--quiet]\n"
     "       diffdope_refine --print-config [--config FILE] [--device D]\n"
     "\n"
-    "  --rgb FILE        colour or grey image (8/16-bit, anything OpenCV reads)\n"
+    "  --rgb FILE        colour or grey image: PNG, JPEG, BMP, TIFF or PNM (8/16-bit or float in [0, 1])\n"
     "  --camera FILE     intrinsics of the (rectified) image, .json or .yaml/.yml: fx, fy, cx, cy[, width, height],\n"
     "                    or a 3x3 matrix as BOP's cam_K (9 values, row-major), K / k or camera_matrix: {data: [...]}\n"
     "  --mesh FILE       textured model (PLY incl. `comment TextureFile`, OBJ+MTL, glTF/GLB, ...)\n"

@@ -1,6 +1,9 @@
 // Shared helpers of the command-line tools (tool_io.hpp).
 #include "tool_io.hpp"
 
+#include "diffdope/image_file.hpp"
+#include "diffdope/input_limits.hpp"
+
 #include <fcntl.h>
 #include <unistd.h>
 
@@ -47,16 +50,8 @@ QuietStderr::~QuietStderr() {
 void check_file(const std::string& path) { check_input_file(path); }
 
 cv::Mat read_image(const std::string& path, int flags, const std::string& kind) {
-  check_file(path);
-  cv::Mat img;
-  try {
-    QuietStderr quiet;
-    img = cv::imread(path, flags);
-  } catch (const std::exception& e) {
-    fail(path, "cannot decode the " + kind + " image (" + one_line(e.what()) + ")");
-  }
-  if (img.empty()) fail(path, "cannot read it as an image (corrupt file or unsupported format)");
-  return img;
+  QuietStderr quiet;  // (decoders' warnings: the error says what matters)
+  return read_image_file(path, flags, kind, input_limits::kMaxImagePixels);
 }
 
 std::string fmt(double v, const char* f) {

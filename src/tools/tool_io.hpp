@@ -44,7 +44,8 @@ class QuietStderr {
 };
 
 void check_file(const std::string& path);
-/// The image at `path` (cv::imread `flags`); InputError naming the file when it cannot be decoded.
+/// The image at `path` (cv::imread `flags`, as stored: no EXIF rotation; at most input_limits::kMaxImagePixels,
+/// checked before decoding); InputError naming the file when it cannot be used (read_image_file()).
 cv::Mat read_image(const std::string& path, int flags, const std::string& kind);
 std::string fmt(double v, const char* f = "%.6f");
 std::string size_str(int w, int h);

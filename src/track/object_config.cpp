@@ -119,6 +119,11 @@ ObjectsConfig parse_objects_config(const std::string& yaml, const std::string& o
   } catch (const YAML::Exception& e) {
     throw std::runtime_error(origin + ": not valid YAML: " + e.what());
   }
+  try {
+    check_yaml_expansion(root, origin);
+  } catch (const InputFileError& e) {
+    throw std::runtime_error(origin + ": " + e.what());
+  }
   if (!root.IsMap()) throw std::runtime_error(origin + ": expected a mapping with 'objects' (and 'refiner')");
   ObjectsConfig cfg;
   cfg.refiner = base;

@@ -6,6 +6,7 @@
 #include <filesystem>
 #include <fstream>
 #include <nlohmann/json.hpp>
+#include <opencv2/imgcodecs.hpp>
 #include <set>
 #include <unistd.h>
 
@@ -88,6 +89,53 @@ TEST(ToolsEndToEnd, EvalReportsMissingDatasetClearly) {
   const std::string text((std::istreambuf_iterator<char>(f)), std::istreambuf_iterator<char>());
   EXPECT_NE(text.find("/nonexistent/bop"), std::string::npos) << text;
   EXPECT_EQ(run(std::string(DIFFDOPE_EVAL_EXE) + " --bop x > /dev/null 2>&1"), 2);  // usage error
+}
+
+// One unusable scene (zero intrinsics) and one unusable sample (a mask of the wrong size) are named and skipped;
+// the rest is scored and the exit code says that something was left out.
+TEST(ToolsEndToEnd, EvalSkipsWhatItCannotUseAndScoresTheRest) {
+  TempDir tmp;
+  const std::string root = (tmp.path / "bop").string();
+  ASSERT_EQ(run(std::string(DIFFDOPE_MAKE_DATASET_EXE) + " --out " + root +
+                " --scenes 3 --width 160 --height 120 --seed 5 2>/dev/null"), 0);
+  const fs::path cams = fs::path(root) / "test/000001/scene_camera.json";
+  json c = json::parse(std::ifstream(cams));
+  c["0"]["cam_K"] = std::vector<double>(9, 0.0);
+  std::ofstream(cams) << c.dump();
+  cv::imwrite((fs::path(root) / "test/000002/mask_visib/000000_000000.png").string(), cv::Mat::zeros(10, 10, CV_8U));
+  const std::string cfg = (tmp.path / "small.yaml").string();
+  std::ofstream(cfg) << "batch_size: 4\niterations: 10\n";
+  const std::string out = (tmp.path / "res.jsonl").string(), err = (tmp.path / "err.txt").string();
+  EXPECT_EQ(run(std::string(DIFFDOPE_EVAL_EXE) + " --bop " + root + " --split test --perturbations " +
+                (tmp.path / "pert").string() + " --out " + out + " --generate 1 --seed 3 --config " + cfg +
+                " --levels easy > /dev/null 2> " + err),
+            1);
+  std::ifstream f(err);
+  const std::string text((std::istreambuf_iterator<char>(f)), std::istreambuf_iterator<char>());
+  EXPECT_NE(text.find(cams.string() + " (image 0): cam_K"), std::string::npos) << text;
+  EXPECT_NE(text.find("scene 1 skipped"), std::string::npos) << text;
+  EXPECT_NE(text.find("test/000002 (image 0, instance 0): mask: image is 10x10"), std::string::npos) << text;
+  std::ifstream lines(out);
+  int scored = 0;
+  for (std::string line; std::getline(lines, line);) {
+    EXPECT_NE(json::parse(line)["scene_id"].get<int>(), 1);
+    ++scored;
+  }
+  EXPECT_GE(scored, 2);  // scene 2's other objects and scene 3's
+}
+
+TEST(ToolsEndToEnd, GeneratorArgumentsAreCheckedNotThrown) {
+  TempDir tmp;
+  const std::string err = (tmp.path / "err.txt").string();
+  for (const std::string flags : {"--width abc", "--scenes 99999999999", "--height 1e3"}) {
+    EXPECT_EQ(run(std::string(DIFFDOPE_MAKE_DATASET_EXE) + " --out " + (tmp.path / "d").string() + " " + flags +
+                  " 2> " + err),
+              2)
+        << flags;
+    std::ifstream f(err);
+    const std::string text((std::istreambuf_iterator<char>(f)), std::istreambuf_iterator<char>());
+    EXPECT_NE(text.find(flags.substr(0, flags.find(' '))), std::string::npos) << text;
+  }
 }
 
 // An evaluation that evaluated nothing, or scored a symmetric object without knowing it is, must not

@@ -1,0 +1,23 @@
+#pragma once
+// The limits every input file meets, in one place: a file that exceeds one is refused with a message naming it,
+// before it costs time or memory. Mesh-specific limits (vertices, triangles, texture pixels) are
+// MeshLoadOptions' (mesh.hpp); the calibration's capture count is CalibrationOptions'.
+#include <cstdint>
+
+namespace diffdope::input_limits {
+
+/// Nesting depth of a JSON or YAML file (camera, pose, BOP files, configs): a deeper one is no such file, and
+/// reading it recursively would exhaust the stack.
+constexpr int kMaxNesting = 64;
+/// Nodes a YAML file may expand to, aliases counted each time they are used (a "billion laughs" of a few
+/// hundred bytes would otherwise expand to gigabytes).
+constexpr long long kMaxYamlNodes = 100000;
+/// Size of a camera, pose or options file.
+constexpr std::uintmax_t kMaxTextFileBytes = std::uintmax_t(64) << 20;
+/// Pixels of an input image (rgb, depth, mask), read from the file's header before decoding: 2^25 (e.g.
+/// 8192 x 4096) is beyond any depth camera and keeps a decoded float RGB copy under 0.5 GB.
+constexpr long long kMaxImagePixels = 1LL << 25;
+/// Size of an image file (compressed).
+constexpr std::uintmax_t kMaxImageFileBytes = std::uintmax_t(1) << 30;
+
+}  // namespace diffdope::input_limits
