@@ -20,4 +20,7 @@ constexpr long long kMaxImagePixels = 1LL << 25;
 /// Size of an image file (compressed).
 constexpr std::uintmax_t kMaxImageFileBytes = std::uintmax_t(1) << 30;
 
+/// Distance of a URDF joint's or visual's origin from its parent (metres).
+constexpr double kMaxRobotOffset = 1000.0;
+
 }  // namespace diffdope::input_limits

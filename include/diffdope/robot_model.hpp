@@ -39,13 +39,7 @@ class RobotModel {
   /// The joints whose positions link_poses() needs: movable (revolute, continuous, prismatic), not mimic.
   std::vector<std::string> joint_names() const;
 
-  /// Root (base) from every link at `positions` (joint name -> radians or metres; extra names are ignored).
-  /// Throws std::invalid_argument naming a needed joint that is missing or not finite.
-  std::map<std::string, Pose> link_poses(const std::map<std::string, double>& positions) const;
-  /// Every visual placed in the base frame at `positions` (for merge_meshes()).
-  std::vector<MeshPart> posed_visuals(const std::map<std::string, double>& positions) const;
-
- private:
+  /// One joint of the tree, as read from the URDF.
   struct Joint {
     std::string name, parent, child;
     enum class Type { kFixed, kRevolute, kContinuous, kPrismatic } type = Type::kFixed;
@@ -54,6 +48,14 @@ class RobotModel {
     std::string mimic;  // the joint this one follows (q = multiplier * q_mimic + offset)
     double multiplier = 1, offset = 0;
   };
+
+  /// Root (base) from every link at `positions` (joint name -> radians or metres; extra names are ignored).
+  /// Throws std::invalid_argument naming a needed joint that is missing or not finite.
+  std::map<std::string, Pose> link_poses(const std::map<std::string, double>& positions) const;
+  /// Every visual placed in the base frame at `positions` (for merge_meshes()).
+  std::vector<MeshPart> posed_visuals(const std::map<std::string, double>& positions) const;
+
+ private:
   double position_of(const Joint& j, const std::map<std::string, double>& positions) const;
 
   std::string name_, root_;

@@ -1,6 +1,7 @@
 // A robot from URDF (robot_model.hpp): urdfdom parses, we load the meshes and do the forward kinematics.
 #include "diffdope/robot_model.hpp"
 
+#include <console_bridge/console.h>
 #include <urdf_parser/urdf_parser.h>
 
 #include <Eigen/Geometry>
@@ -8,19 +9,107 @@
 #include <filesystem>
 #include <fstream>
 #include <functional>
+#include <mutex>
 #include <sstream>
 #include <stdexcept>
 
 #include "diffdope/input_files.hpp"
+#include "diffdope/input_limits.hpp"
 #include "diffdope/primitives.hpp"
 
 namespace diffdope {
 namespace {
 
+/// urdfdom's error messages (console_bridge) while it parses, to be said in our error rather than lost on a
+/// console: one parse at a time (the handler is global).
+class UrdfdomErrors : public console_bridge::OutputHandler {
+ public:
+  UrdfdomErrors() : lock_(mutex()) { console_bridge::useOutputHandler(this); }
+  ~UrdfdomErrors() override { console_bridge::restorePreviousOutputHandler(); }
+  void log(const std::string& text, console_bridge::LogLevel level, const char*, int) override {
+    if (level >= console_bridge::CONSOLE_BRIDGE_LOG_ERROR && first.empty()) first = text;
+  }
+  std::string first;  // the first error (later ones follow from it)
+
+ private:
+  static std::mutex& mutex() {
+    static std::mutex m;
+    return m;
+  }
+  std::lock_guard<std::mutex> lock_;
+};
+
+/// The deepest element nesting of an XML text (tags counted; comments, CDATA, declarations and processing
+/// instructions skipped), stopping once it exceeds `limit`: urdfdom's parser recurses per level, so a file nested
+/// 100 000 deep would exhaust the stack.
+int xml_depth(const std::string& xml, int limit) {
+  int depth = 0, deepest = 0;
+  for (size_t i = xml.find('<'); i != std::string::npos && deepest <= limit; i = xml.find('<', i + 1)) {
+    const auto skip_to = [&](const char* end) {
+      const size_t e = xml.find(end, i);
+      i = e == std::string::npos ? xml.size() : e;
+    };
+    if (xml.compare(i, 4, "<!--") == 0) skip_to("-->");
+    else if (xml.compare(i, 9, "<![CDATA[") == 0) skip_to("]]>");
+    else if (xml.compare(i, 2, "<?") == 0 || xml.compare(i, 2, "<!") == 0) skip_to(">");
+    else if (xml.compare(i, 2, "</") == 0) depth = std::max(0, depth - 1);
+    else {
+      const size_t close = xml.find('>', i);
+      if (close == std::string::npos) break;
+      if (xml[close - 1] != '/') deepest = std::max(deepest, ++depth);
+      i = close;
+    }
+  }
+  return deepest;
+}
+
 Pose to_pose(const urdf::Pose& p) {
   double x, y, z, w;
   p.rotation.getQuaternion(x, y, z, w);
   return Pose::from_quaternion(x, y, z, w, Eigen::Vector3d(p.position.x, p.position.y, p.position.z));
+}
+
+/// A joint's or visual's origin must be finite and within input_limits::kMaxRobotOffset: beyond, the forward
+/// kinematics overflow and the failure would surface far from its cause.
+void check_origin(const Pose& p, const std::string& where) {
+  if (!p.t.allFinite() || !p.R.allFinite()) throw std::runtime_error(where + ": origin is not finite");
+  if (p.t.cwiseAbs().maxCoeff() > input_limits::kMaxRobotOffset) {
+    std::ostringstream m;
+    m.precision(4);
+    m << where << ": origin (" << p.t.transpose() << ") m is more than " << input_limits::kMaxRobotOffset
+      << " m away: not a robot's";
+    throw std::runtime_error(m.str());
+  }
+}
+
+RobotModel::Joint joint_of(const urdf::Joint& j, const std::string& parent, const std::string& origin) {
+  using Joint = RobotModel::Joint;
+  Joint joint;
+  joint.name = j.name;
+  joint.parent = parent;
+  joint.child = j.child_link_name;
+  joint.parent_from_origin = to_pose(j.parent_to_joint_origin_transform);
+  joint.axis = Eigen::Vector3d(j.axis.x, j.axis.y, j.axis.z);
+  const std::string where = origin + ": joint '" + j.name + "'";
+  check_origin(joint.parent_from_origin, where);
+  switch (j.type) {
+    case urdf::Joint::FIXED: joint.type = Joint::Type::kFixed; break;
+    case urdf::Joint::REVOLUTE: joint.type = Joint::Type::kRevolute; break;
+    case urdf::Joint::CONTINUOUS: joint.type = Joint::Type::kContinuous; break;
+    case urdf::Joint::PRISMATIC: joint.type = Joint::Type::kPrismatic; break;
+    default:
+      throw std::runtime_error(where + ": floating and planar joints are not supported (a fixed-base robot is)");
+  }
+  if (joint.type != Joint::Type::kFixed) {
+    if (!joint.axis.allFinite() || joint.axis.norm() < 1e-9) throw std::runtime_error(where + ": zero axis");
+    joint.axis.normalize();
+  }
+  if (j.mimic) {
+    joint.mimic = j.mimic->joint_name;
+    joint.multiplier = j.mimic->multiplier;
+    joint.offset = j.mimic->offset;
+  }
+  return joint;
 }
 
 }  // namespace
@@ -33,14 +122,32 @@ RobotModel RobotModel::load_urdf(const std::string& path, const PackageResolver&
 
 RobotModel RobotModel::parse_urdf(const std::string& xml, const std::string& base_dir, const std::string& origin,
                                   const PackageResolver& resolve_package, const MeshLoadOptions& mesh_options) {
-  const urdf::ModelInterfaceSharedPtr urdf = urdf::parseURDF(xml);
-  if (!urdf || !urdf->getRoot()) throw std::runtime_error(origin + ": not a valid URDF (see urdfdom's message above)");
+  if (xml.find_first_not_of(" \t\r\n") == std::string::npos) throw std::runtime_error(origin + ": the file is empty");
+  if (xml_depth(xml, input_limits::kMaxNesting) > input_limits::kMaxNesting)
+    throw std::runtime_error(origin + ": XML nested deeper than " + std::to_string(input_limits::kMaxNesting) +
+                             " levels: not a URDF");
+  urdf::ModelInterfaceSharedPtr urdf;
+  std::string urdfdom_error;
+  {
+    UrdfdomErrors errors;
+    urdf = urdf::parseURDF(xml);
+    urdfdom_error = errors.first;
+  }
+  // urdfdom drops what it cannot read (a visual with a NaN scale) with only a console message: that is an error.
+  if (!urdfdom_error.empty()) throw std::runtime_error(origin + ": not a valid URDF: " + urdfdom_error);
+  if (!urdf || !urdf->getRoot()) throw std::runtime_error(origin + ": not a valid URDF (no root link)");
   RobotModel model;
   model.name_ = urdf->getName();
   model.root_ = urdf->getRoot()->name;
 
   std::map<std::string, std::shared_ptr<const Mesh>> loaded;  // by file and colour
-  const std::function<void(const urdf::LinkConstSharedPtr&)> walk = [&](const urdf::LinkConstSharedPtr& link) {
+  // Depth first, parents before children, without recursion (a chain of thousands of links must not exhaust the
+  // stack): each entry is a link and the joint that leads to it (null for the root).
+  std::vector<std::pair<urdf::JointConstSharedPtr, urdf::LinkConstSharedPtr>> pending{{nullptr, urdf->getRoot()}};
+  while (!pending.empty()) {
+    const auto [via, link] = pending.back();
+    pending.pop_back();
+    if (via) model.joints_.push_back(joint_of(*via, link->getParent()->name, origin));
     for (const urdf::VisualSharedPtr& v : link->visual_array) {
       if (!v || !v->geometry) continue;
       const std::string where = origin + ": link '" + link->name + "'";
@@ -49,6 +156,7 @@ RobotModel RobotModel::parse_urdf(const std::string& xml, const std::string& bas
       RobotVisual rv;
       rv.link = link->name;
       rv.link_from_visual = to_pose(v->origin);
+      check_origin(rv.link_from_visual, where + ": visual");
       std::ostringstream key;
       key << colour.transpose() << " ";
       std::function<Mesh()> make;
@@ -112,36 +220,9 @@ RobotModel RobotModel::parse_urdf(const std::string& xml, const std::string& bas
       rv.mesh = found->second;
       model.visuals_.push_back(std::move(rv));
     }
-    for (const urdf::JointSharedPtr& j : link->child_joints) {
-      Joint joint;
-      joint.name = j->name;
-      joint.parent = link->name;
-      joint.child = j->child_link_name;
-      joint.parent_from_origin = to_pose(j->parent_to_joint_origin_transform);
-      joint.axis = Eigen::Vector3d(j->axis.x, j->axis.y, j->axis.z);
-      const std::string where = origin + ": joint '" + j->name + "'";
-      switch (j->type) {
-        case urdf::Joint::FIXED: joint.type = Joint::Type::kFixed; break;
-        case urdf::Joint::REVOLUTE: joint.type = Joint::Type::kRevolute; break;
-        case urdf::Joint::CONTINUOUS: joint.type = Joint::Type::kContinuous; break;
-        case urdf::Joint::PRISMATIC: joint.type = Joint::Type::kPrismatic; break;
-        default:
-          throw std::runtime_error(where + ": floating and planar joints are not supported (a fixed-base robot is)");
-      }
-      if (joint.type != Joint::Type::kFixed) {
-        if (!joint.axis.allFinite() || joint.axis.norm() < 1e-9) throw std::runtime_error(where + ": zero axis");
-        joint.axis.normalize();
-      }
-      if (j->mimic) {
-        joint.mimic = j->mimic->joint_name;
-        joint.multiplier = j->mimic->multiplier;
-        joint.offset = j->mimic->offset;
-      }
-      model.joints_.push_back(joint);
-      walk(urdf->getLink(j->child_link_name));
-    }
-  };
-  walk(urdf->getRoot());
+    for (auto j = link->child_joints.rbegin(); j != link->child_joints.rend(); ++j)
+      pending.emplace_back(*j, urdf->getLink((*j)->child_link_name));
+  }
   if (model.visuals_.empty()) throw std::runtime_error(origin + ": no link has a visual: nothing to render");
   for (const Joint& j : model.joints_)
     if (!j.mimic.empty()) {

@@ -4,6 +4,8 @@
 #include <diagnostic_msgs/DiagnosticArray.h>
 #include <gtest/gtest.h>
 #include <ros/ros.h>
+#include <ros/topic.h>
+#include <std_msgs/Bool.h>
 
 #include <future>
 #include <mutex>
@@ -80,6 +82,14 @@ struct World {
 World* world = nullptr;
 
 bool call(diffdope_ros::Refine& srv) { return ros::service::call(kService, srv); }
+
+// The node says (latched) when its meshes are loaded and its inputs subscribed: what a launch waits for before
+// it plays data.
+TEST(RefineService, SaysWhenItIsReady) {
+  const auto ready = ros::topic::waitForMessage<std_msgs::Bool>("/diffdope_refiner/ready", ros::Duration(60));
+  ASSERT_TRUE(ready) << "no ~ready message";
+  EXPECT_TRUE(ready->data);
+}
 
 TEST(RefineService, ServedDuringStreaming) {
   if (!world->expect_streaming) {  // on_request: the bag plays, nothing is refined until the call

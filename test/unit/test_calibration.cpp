@@ -151,6 +151,32 @@ TEST(RobotModel, RefusesWhatItCannotUse) {
   expect_error("<robot name=\"x\"><link name=\"a\"><visual><geometry><box size=\"0.1 0.1 0.1\"/></geometry></visual></link>"
                "<link name=\"b\"/><joint name=\"f\" type=\"floating\"><parent link=\"a\"/><child link=\"b\"/></joint>"
                "</robot>", "joint 'f'");
+  // urdfdom's own reasons are in the message, not on a console.
+  const std::string box = "<visual><geometry><box size=\"0.1 0.1 0.1\"/></geometry></visual>";
+  expect_error("", "the file is empty");
+  expect_error("<robot name=\"x\"><link name=\"a\">" + box + "</link><link name=\"a\"/></robot>",
+               "link 'a' is not unique");
+  expect_error("<robot name=\"x\"><link name=\"a\">" + box + "</link><link name=\"b\"/>"
+               "<joint name=\"j\" type=\"fixed\"><parent link=\"a\"/><child link=\"b\"/></joint>"
+               "<joint name=\"k\" type=\"fixed\"><parent link=\"b\"/><child link=\"a\"/></joint></robot>",
+               "not a valid tree");
+  expect_error("<robot name=\"x\"><link name=\"a\"><visual><geometry><mesh filename=\"m.stl\" scale=\"nan nan nan\"/>"
+               "</geometry></visual></link></robot>", "Mesh scale");
+  expect_error("<robot name=\"x\"><link name=\"a\">" + box + "</link><link name=\"b\"/><joint name=\"j\" "
+               "type=\"fixed\"><origin xyz=\"1e300 0 0\"/><parent link=\"a\"/><child link=\"b\"/></joint></robot>",
+               "joint 'j': origin (1e+300");
+  // Nesting and chains that a recursive reader would overflow the stack on.
+  std::string deep = "<robot name=\"x\">";
+  for (int i = 0; i < 100000; ++i) deep += "<a>";
+  for (int i = 0; i < 100000; ++i) deep += "</a>";
+  expect_error(deep + "</robot>", "nested deeper than 64");
+  std::string chain = "<robot name=\"x\"><link name=\"l0\">" + box + "</link>";
+  for (int i = 1; i < 10000; ++i)
+    chain += "<link name=\"l" + std::to_string(i) + "\"/><joint name=\"j" + std::to_string(i) +
+             "\" type=\"fixed\"><parent link=\"l" + std::to_string(i - 1) + "\"/><child link=\"l" +
+             std::to_string(i) + "\"/></joint>";
+  const RobotModel long_chain = RobotModel::parse_urdf(chain + "</robot>", dir, "chain.urdf");
+  EXPECT_EQ(long_chain.link_poses({}).size(), 10000u);
 }
 
 TEST(RefineViews, SeveralViewsOfOnePose) {

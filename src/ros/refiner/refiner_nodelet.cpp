@@ -5,6 +5,7 @@
 #include <geometry_msgs/PoseWithCovarianceStamped.h>
 #include <pluginlib/class_list_macros.hpp>
 #include <ros/package.h>
+#include <std_msgs/Bool.h>
 #include <visualization_msgs/MarkerArray.h>
 
 #include "diffdope_ros/conversions.hpp"
@@ -51,6 +52,12 @@ void RefinerNodelet::onInit() {
   service_spinner_ = std::make_unique<ros::AsyncSpinner>(1, &service_queue_);
   service_spinner_->start();
   watchdog_timer_ = pnh.createWallTimer(ros::WallDuration(1.0), &RefinerNodelet::onWatchdog, this);
+  // Latched: a launch or a bag player can wait for the meshes to be loaded and the inputs subscribed; false when
+  // the configuration leaves nothing to refine (the error is logged and in diagnostics).
+  ready_pub_ = pnh.advertise<std_msgs::Bool>("ready", 1, true);
+  std_msgs::Bool ready;
+  ready.data = refiner_ != nullptr;
+  ready_pub_.publish(ready);
   const diffdope::RefinerOptions& o = refiner_options_;
   const diffdope::TrackOptions& t = track_options_;
   NODELET_INFO_STREAM("diffdope refiner ready: mode "

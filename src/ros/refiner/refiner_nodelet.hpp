@@ -156,7 +156,7 @@ class RefinerNodelet : public nodelet::Nodelet {
   std::unique_ptr<tf2_ros::Buffer> tf_buffer_;
   std::unique_ptr<tf2_ros::TransformListener> tf_listener_;
   std::unique_ptr<tf2_ros::TransformBroadcaster> tf_broadcaster_;
-  ros::Publisher refined_pub_, markers_pub_;
+  ros::Publisher refined_pub_, markers_pub_, ready_pub_;
   image_transport::Publisher overlay_pub_;
   std::unique_ptr<diagnostic_updater::Updater> diagnostics_;
 
