@@ -44,6 +44,13 @@ struct MeshLoadOptions {
   /// Textures larger than this on their longer side are downsampled on load (the renderer samples mip levels
   /// far below it; a whole 8k texture would only be memory). 0 = keep the file's size.
   int max_texture_size = 4096;
+  /// All a model's textures together, in pixels after the max_texture_size downsampling (each costs 12 bytes per
+  /// pixel in memory): a model beyond it is refused. 2^25 is two 4096^2 atlases.
+  long long max_total_texture_pixels = 1LL << 25;
+  /// Where a model may read its textures, material libraries and glTF buffers from: its own folder and those below
+  /// it, and these folders (and those below them). A reference that leaves them (`../../x.png`, an absolute path
+  /// elsewhere, a link that points out) is refused: opening a model must not read files the user did not point at.
+  std::vector<std::string> resource_dirs;
 };
 
 /// A simplified version of a mesh's surface over the mesh's textures: fewer triangles, and only the vertices they

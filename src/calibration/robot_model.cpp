@@ -172,9 +172,18 @@ RobotModel RobotModel::parse_urdf(const std::string& xml, const std::string& bas
           if (!rv.scale.allFinite() || rv.scale.cwiseAbs().minCoeff() <= 0)
             throw std::runtime_error(where + ": mesh scale must be finite and non-zero");
           key << rv.source;
-          make = [&, path = rv.source] {
+          // A description package keeps textures beside its meshes' folder (materials/, textures/): a mesh may
+          // read from the URDF's folder and, named by package://, from its package too.
+          std::vector<std::string> resource_dirs{base_dir};
+          const std::string package_prefix = "package://";
+          if (m.filename.rfind(package_prefix, 0) == 0 && resolve_package) {
+            const std::string rest = m.filename.substr(package_prefix.size());
+            resource_dirs.push_back(resolve_package(rest.substr(0, rest.find('/'))));
+          }
+          make = [&, path = rv.source, resource_dirs] {
             MeshLoadOptions o = mesh_options;
             o.default_color = colour;
+            o.resource_dirs.insert(o.resource_dirs.end(), resource_dirs.begin(), resource_dirs.end());
             return Mesh::load(path, o);
           };
           break;

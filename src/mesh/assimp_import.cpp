@@ -28,8 +28,9 @@ namespace {
 // Collects the textures a model references, each distinct one once.
 class TextureSources {
  public:
-  TextureSources(const std::string& model, const aiScene* scene, std::vector<TextureSource>* out)
-      : model_(model), scene_(scene), out_(out) {
+  TextureSources(const std::string& model, const aiScene* scene, std::vector<TextureSource>* out,
+                 const MeshLoadOptions& options)
+      : model_(model), scene_(scene), out_(out), options_(options) {
     dir_ = fs::path(model).parent_path();
     if (dir_.empty()) dir_ = ".";
   }
@@ -96,8 +97,15 @@ class TextureSources {
     }
     // Absolute or foreign paths baked in by the authoring tool: try the bare file name next to the model.
     candidates.push_back(dir_ / fs::path(norm).filename());
+    // The first that exists in the folders a model may read; one that exists only elsewhere is refused.
+    for (const auto& c : candidates)
+      if (!c.empty() && is_file(c) && in_resource_dirs(model_, c.string(), options_)) return c;
     for (const auto& c : candidates) {
-      if (!c.empty() && is_file(c)) return c;
+      std::error_code ec;
+      if (!c.empty() && fs::exists(c, ec)) {
+        if (!in_resource_dirs(model_, c.string(), options_)) fail(model_, outside_message(model_, "texture", ref, c.string()));
+        fail(model_, "texture '" + ref + "' is not a regular file (" + c.string() + ")");
+      }
     }
     return {};
   }
@@ -105,6 +113,7 @@ class TextureSources {
   std::string model_;
   const aiScene* scene_;
   std::vector<TextureSource>* out_;
+  const MeshLoadOptions& options_;
   fs::path dir_;
   std::map<std::string, int> index_;
 };
@@ -190,7 +199,7 @@ ImportedModel import_with_assimp(const std::string& path, const MeshLoadOptions&
   out.triangles.reserve(3 * total_t);
   out.tri_texture.reserve(total_t);
 
-  TextureSources textures(path, scene, &out.textures);
+  TextureSources textures(path, scene, &out.textures, options);
   const float scale = static_cast<float>(options.scale);
 
   for (unsigned i = 0; i < scene->mNumMeshes; ++i) {

@@ -14,6 +14,10 @@
 
 #include "mesh/mesh_io_internal.hpp"
 
+#include <nlohmann/json.hpp>
+
+#include "diffdope/input_files.hpp"
+
 namespace diffdope {
 namespace mesh_io {
 
@@ -296,8 +300,35 @@ void check_glb(const std::string& path) {
   }
 }
 
-/// OBJ: a material library it names must exist (else assimp loads the mesh grey without a word).
-void check_obj_materials(const std::string& path) {
+bool in_resource_dirs(const std::string& model, const std::string& file, const MeshLoadOptions& options) {
+  std::error_code ec;
+  const fs::path target = fs::weakly_canonical(file, ec);
+  if (ec) return false;
+  const auto below = [&](const fs::path& dir) {
+    std::error_code e;
+    const fs::path root = fs::weakly_canonical(dir.empty() ? fs::path(".") : dir, e);
+    if (e) return false;
+    const auto mismatch = std::mismatch(root.begin(), root.end(), target.begin(), target.end());
+    return mismatch.first == root.end();
+  };
+  if (below(fs::path(model).parent_path())) return true;
+  for (const std::string& d : options.resource_dirs)
+    if (below(d)) return true;
+  return false;
+}
+
+std::string outside_message(const std::string& model, const std::string& what, const std::string& ref,
+                            const std::string& file) {
+  std::error_code ec;
+  const fs::path resolved = fs::weakly_canonical(file, ec);
+  std::string dir = fs::path(model).parent_path().string();
+  if (dir.empty()) dir = ".";
+  return what + " '" + ref + "' is " + (ec ? file : resolved.string()) + ", outside the model's folder (" + dir +
+         "): refused, a model may only read files in its folder or below (MeshLoadOptions::resource_dirs adds "
+         "folders)";
+}
+
+void check_obj_materials(const std::string& path, const MeshLoadOptions& options) {
   std::ifstream in(path);
   std::string line;
   const fs::path dir = fs::path(path).parent_path();
@@ -305,9 +336,53 @@ void check_obj_materials(const std::string& path) {
     const std::string t = trim(line);
     if (t.rfind("mtllib", 0) != 0 || t.size() < 7 || !std::isspace(static_cast<unsigned char>(t[6]))) continue;
     const std::string lib = trim(t.substr(6));
+    if (lib.empty()) continue;
+    // (assimp opens the library relative to the OBJ's folder, whatever the path says)
+    if (fs::path(lib).is_absolute())
+      fail(path, "material library '" + lib + "' is an absolute path: it must be named relative to the OBJ's folder");
     std::error_code ec;
-    if (!lib.empty() && !fs::is_regular_file(dir / lib, ec) && !fs::is_regular_file(dir / fs::path(lib).filename(), ec))
+    const fs::path file = dir / lib;
+    if (!fs::exists(file, ec))
       fail(path, "material library '" + lib + "' not found next to the OBJ (its colours and textures would be lost)");
+    if (!in_resource_dirs(path, file.string(), options)) fail(path, outside_message(path, "material library", lib, file.string()));
+    if (!fs::is_regular_file(file, ec)) fail(path, "material library '" + lib + "' is not a regular file");
+  }
+}
+
+void check_gltf_uris(const std::string& path, const MeshLoadOptions& options) {
+  std::string text;
+  try {
+    text = read_text_file(path, "the glTF file");
+  } catch (const std::exception& e) {
+    fail(path, e.what());
+  }
+  nlohmann::json j;
+  try {
+    j = parse_json_checked(text, path);
+  } catch (const std::exception& e) {
+    fail(path, e.what());
+  }
+  if (!j.is_object()) return;  // (assimp says what is wrong)
+  const fs::path dir = fs::path(path).parent_path();
+  for (const char* kind : {"buffers", "images"}) {
+    const auto list = j.find(kind);
+    if (list == j.end() || !list->is_array()) continue;
+    for (const auto& entry : *list) {
+      if (!entry.is_object() || !entry.contains("uri") || !entry["uri"].is_string()) continue;
+      const std::string uri = entry["uri"].get<std::string>();
+      if (uri.rfind("data:", 0) == 0) continue;
+      const std::string what = std::string(kind) == "buffers" ? "buffer" : "image";
+      if (uri.find("://") != std::string::npos || fs::path(uri).is_absolute())
+        fail(path, what + " '" + uri + "' is not a path relative to the glTF file");
+      const fs::path file = dir / uri;
+      std::error_code ec;
+      if (!fs::exists(file, ec)) {
+        if (what == "buffer") fail(path, "buffer '" + uri + "' not found next to the glTF file");
+        continue;  // (a missing image: the texture reader says so)
+      }
+      if (!in_resource_dirs(path, file.string(), options)) fail(path, outside_message(path, what, uri, file.string()));
+      if (!fs::is_regular_file(file, ec)) fail(path, what + " '" + uri + "' is not a regular file");
+    }
   }
 }
 

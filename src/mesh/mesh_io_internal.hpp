@@ -56,8 +56,21 @@ PlyHeader check_ply(const std::string& path, const MeshLoadOptions& options);
 /// GLB: the chunk lengths must fit in the file (assimp allocates what the header says before reading).
 void check_glb(const std::string& path);
 
-/// OBJ: a material library it names must exist (else assimp loads the mesh grey without a word).
-void check_obj_materials(const std::string& path);
+/// Whether `file` (resolved: `..` and links followed) lies in the model's folder or below, or in one of
+/// MeshLoadOptions::resource_dirs.
+bool in_resource_dirs(const std::string& model, const std::string& file, const MeshLoadOptions& options);
+/// The message of a reference `ref` (the model names it `what`, e.g. "texture") that resolves to `file`, outside
+/// the folders a model may read.
+std::string outside_message(const std::string& model, const std::string& what, const std::string& ref,
+                            const std::string& file);
+
+/// OBJ: a material library it names must exist (else assimp loads the mesh grey without a word), be a regular
+/// file and lie in the resource folders.
+void check_obj_materials(const std::string& path, const MeshLoadOptions& options);
+
+/// glTF: every buffer and image it names by URI (not data: URIs) must be a regular file in the resource folders
+/// (assimp opens them itself, a pipe would hang it).
+void check_gltf_uris(const std::string& path, const MeshLoadOptions& options);
 
 // ---- the imported model ----
 

@@ -151,7 +151,8 @@ Mesh Mesh::load(const std::string& path, const MeshLoadOptions& options) {
   PlyHeader ply;
   if (is_ply) ply = check_ply(path, options);
   if (ext == ".glb") check_glb(path);
-  if (ext == ".obj") check_obj_materials(path);
+  if (ext == ".obj") check_obj_materials(path, options);
+  if (ext == ".gltf") check_gltf_uris(path, options);
 
   ImportedModel model;
   if (options.isolate_import) {
@@ -177,7 +178,15 @@ Mesh Mesh::load(const std::string& path, const MeshLoadOptions& options) {
   mesh.uvs = std::move(model.uvs);
   mesh.triangles = std::move(model.triangles);
   mesh.tri_texture = std::move(model.tri_texture);
-  for (const TextureSource& src : model.textures) mesh.textures.push_back(decode_texture(path, src, options));
+  long long texture_pixels = 0;  // (decoded one at a time: at most one beyond the budget is ever held)
+  for (const TextureSource& src : model.textures) {
+    mesh.textures.push_back(decode_texture(path, src, options));
+    texture_pixels += static_cast<long long>(mesh.textures.back().width) * mesh.textures.back().height;
+    if (texture_pixels > options.max_total_texture_pixels)
+      fail(path, "its " + std::to_string(model.textures.size()) + " textures hold more than " +
+                     std::to_string(options.max_total_texture_pixels) +
+                     " pixels together (MeshLoadOptions::max_total_texture_pixels): downsample them or use fewer");
+  }
   mesh.finalize();
   return mesh;
 }

@@ -7,6 +7,8 @@
 #include <fstream>
 #include <iostream>
 #include <nlohmann/json.hpp>
+#include <opencv2/core.hpp>
+#include <opencv2/imgcodecs.hpp>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -185,6 +187,21 @@ void detection_seeds() {
   seed("detection3d_array", "two.bin", std::string(w.bytes.begin(), w.bytes.end()));
 }
 
+/// Small images in every format the image reader takes: 8-bit colour, 16-bit depth, float colour, grey.
+void image_seeds() {
+  cv::Mat colour(12, 17, CV_8UC3), depth(12, 17, CV_16UC1), grey(12, 17, CV_8UC1), fcolour(12, 17, CV_32FC3);
+  cv::randu(colour, 0, 255), cv::randu(depth, 0, 4000), cv::randu(grey, 0, 255), cv::randu(fcolour, 0.f, 1.f);
+  const auto add = [](const std::string& name, const cv::Mat& m) {
+    std::vector<uchar> buf;
+    if (cv::imencode(name.substr(name.rfind('.')), m, buf)) seed("image", name, std::string(buf.begin(), buf.end()));
+  };
+  for (const char* ext : {".png", ".jpg", ".bmp", ".tif", ".ppm"}) add(std::string("colour") + ext, colour);
+  add("depth.png", depth);
+  add("depth.tif", depth);
+  add("grey.pgm", grey);
+  add("float.tif", fcolour);
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -196,5 +213,6 @@ int main(int argc, char** argv) {
   mesh_seeds();
   text_seeds(argv[2]);
   detection_seeds();
+  image_seeds();
   return 0;
 }

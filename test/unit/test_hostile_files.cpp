@@ -9,6 +9,7 @@
 #include <assimp/scene.h>
 
 #include <signal.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include <atomic>
@@ -237,6 +238,72 @@ TEST_F(HostileFiles, AHugeTextureIsRefusedFromItsHeaderAndABigOneIsDownsampled) 
   EXPECT_EQ(mesh.textures[0].width, 64);
   EXPECT_EQ(mesh.textures[0].height, 43);
   EXPECT_NEAR(mesh.textures[0].rgb[1], 200 / 255.f, 1e-3);  // (RGB order: green)
+}
+
+// A model reads its textures, material libraries and buffers from its folder (or MeshLoadOptions::resource_dirs)
+// only: a file that names ../../secret.png or /etc/passwd is refused, not opened.
+TEST_F(HostileFiles, AModelReadsOnlyFromItsOwnFolder) {
+  fs::create_directories(dir_ / "model");
+  fs::create_directories(dir_ / "elsewhere");
+  cv::Mat img(8, 8, CV_8UC3, cv::Scalar(10, 200, 30));
+  ASSERT_TRUE(cv::imwrite((dir_ / "elsewhere/secret.png").string(), img));
+  ASSERT_TRUE(cv::imwrite((dir_ / "model/tex.png").string(), img));
+  const std::string ply_body =
+      "element vertex 3\nproperty float x\nproperty float y\nproperty float z\nproperty float texture_u\n"
+      "property float texture_v\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n"
+      "0 0 0 0 0\n1 0 0 1 0\n0 1 0 0 1\n3 0 1 2\n";
+  const auto ply = [&](const std::string& texture) {
+    return "ply\nformat ascii 1.0\ncomment TextureFile " + texture + "\n" + ply_body;
+  };
+  std::string m = load_error(write("model/up.ply", ply("../elsewhere/secret.png")));
+  EXPECT_NE(m.find("outside the model's folder"), std::string::npos) << m;
+  m = load_error(write("model/abs.ply", ply((dir_ / "elsewhere/secret.png").string())));
+  EXPECT_NE(m.find("outside the model's folder"), std::string::npos) << m;
+  // A link inside the folder that points out is outside too.
+  fs::create_symlink(dir_ / "elsewhere/secret.png", dir_ / "model/link.png");
+  m = load_error(write("model/link.ply", ply("link.png")));
+  EXPECT_NE(m.find("outside the model's folder"), std::string::npos) << m;
+  // A folder the caller allows, and the model's own texture, load.
+  MeshLoadOptions allowed;
+  allowed.resource_dirs = {(dir_ / "elsewhere").string()};
+  EXPECT_EQ(load_error((dir_ / "model/up.ply").string(), allowed), "");
+  EXPECT_EQ(load_error(write("model/own.ply", ply("tex.png"))), "");
+  // OBJ material libraries: outside, absolute, or not a file.
+  const std::string tri = "v 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl a\nf 1 2 3\n";
+  write("elsewhere/m.mtl", "newmtl a\nKd 0.2 0.4 0.6\n");
+  m = load_error(write("model/up.obj", "mtllib ../elsewhere/m.mtl\n" + tri));
+  EXPECT_NE(m.find("outside the model's folder"), std::string::npos) << m;
+  m = load_error(write("model/abs.obj", "mtllib /etc/passwd\n" + tri));
+  EXPECT_NE(m.find("absolute path"), std::string::npos) << m;
+  ASSERT_EQ(::mkfifo((dir_ / "model/pipe.mtl").c_str(), 0600), 0);
+  m = load_error(write("model/pipe.obj", "mtllib pipe.mtl\n" + tri));
+  EXPECT_NE(m.find("not a regular file"), std::string::npos) << m;
+  // glTF buffers: a pipe would hang the importer; outside the folder is refused.
+  ASSERT_EQ(::mkfifo((dir_ / "model/pipe.bin").c_str(), 0600), 0);
+  const auto gltf = [](const std::string& uri) {
+    return "{\"asset\": {\"version\": \"2.0\"}, \"buffers\": [{\"uri\": \"" + uri + "\", \"byteLength\": 36}]}";
+  };
+  m = load_error(write("model/pipe.gltf", gltf("pipe.bin")));
+  EXPECT_NE(m.find("buffer 'pipe.bin' is not a regular file"), std::string::npos) << m;
+  write("elsewhere/b.bin", std::string(36, '\0'));
+  m = load_error(write("model/up.gltf", gltf("../elsewhere/b.bin")));
+  EXPECT_NE(m.find("outside the model's folder"), std::string::npos) << m;
+}
+
+TEST_F(HostileFiles, ManyTexturesTogetherHaveABudget) {
+  // Two materials, each with its own 64 x 64 texture: 8192 pixels together.
+  cv::Mat img(64, 64, CV_8UC3, cv::Scalar(10, 200, 30));
+  ASSERT_TRUE(cv::imwrite((dir_ / "a.png").string(), img));
+  ASSERT_TRUE(cv::imwrite((dir_ / "b.png").string(), img));
+  write("m.mtl", "newmtl a\nmap_Kd a.png\nnewmtl b\nmap_Kd b.png\n");
+  const std::string obj = write("m.obj", "mtllib m.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nvt 0 0\nvt 1 0\nvt 0 1\n"
+                                          "vt 1 1\nusemtl a\nf 1/1 2/2 3/3\nusemtl b\nf 2/2 4/4 3/3\n");
+  MeshLoadOptions small;
+  small.max_total_texture_pixels = 6000;
+  const std::string m = load_error(obj, small);
+  EXPECT_NE(m.find("textures hold more than 6000 pixels together"), std::string::npos) << m;
+  small.max_total_texture_pixels = 8192;
+  EXPECT_EQ(load_error(obj, small), "");
 }
 
 TEST_F(HostileFiles, AFileIsReadOnlyAsTheFormatItsExtensionNames) {
