@@ -32,10 +32,11 @@ struct Camera {
   /// 3x3 intrinsic matrix K.
   Eigen::Matrix3d K() const;
   /// Throws std::invalid_argument with the reason when intrinsics or size are unusable: focal lengths in
-  /// [kMinFocal, kMaxFocal] pixels, width and height in [1, kMaxSize], the principal point within ten image
-  /// sizes of the origin, everything finite.
+  /// [kMinFocal, kMaxFocal] pixels and fx / fy within [1 / kMaxPixelAspect, kMaxPixelAspect] (pixels are near
+  /// square; fx = 0.1 with fy = 1e7 is a typo, not a lens), width and height in [1, kMaxSize], the principal
+  /// point within ten image sizes of the origin, everything finite.
   void validate() const;
-  static constexpr double kMinFocal = 0.1, kMaxFocal = 1e7;
+  static constexpr double kMinFocal = 0.1, kMaxFocal = 1e7, kMaxPixelAspect = 10;
   static constexpr int kMaxSize = 16384;
   bool valid() const;
 };

@@ -1,7 +1,7 @@
 #pragma once
 // The limits every input file meets, in one place: a file that exceeds one is refused with a message naming it,
 // before it costs time or memory. Mesh-specific limits (vertices, triangles, texture pixels) are
-// MeshLoadOptions' (mesh.hpp); the calibration's capture count is CalibrationOptions'.
+// MeshLoadOptions' (mesh.hpp).
 #include <cstdint>
 
 namespace diffdope::input_limits {
@@ -20,6 +20,9 @@ constexpr long long kMaxImagePixels = 1LL << 25;
 /// Size of an image file (compressed).
 constexpr std::uintmax_t kMaxImageFileBytes = std::uintmax_t(1) << 30;
 
+/// Captures of one calibration (files, or the node's samples): three to ten constrain every direction; each holds
+/// its images as floats (about 5 MB at 640 x 480), so hundreds would only cost memory.
+constexpr int kMaxCaptures = 64;
 /// Distance of a URDF joint's or visual's origin from its parent (metres).
 constexpr double kMaxRobotOffset = 1000.0;
 

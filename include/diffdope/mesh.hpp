@@ -90,8 +90,11 @@ class Mesh {
   static Mesh load(const std::string& path, const MeshLoadOptions& options = {});
 
   /// Checks consistency, drops nothing silently, computes bounds and adjacency. Call after filling by hand.
-  /// Throws std::runtime_error when the mesh is empty or indices are out of range.
+  /// Throws std::runtime_error when the mesh is empty, indices are out of range or a vertex lies beyond
+  /// kMaxVertexCoordinate.
   void finalize();
+  /// Metres from the model's origin a vertex may lie (100 km: any object or robot, in any unit a user may mix up).
+  static constexpr float kMaxVertexCoordinate = 1e5f;
 
   int num_vertices() const { return static_cast<int>(positions.size()); }
   int num_triangles() const { return static_cast<int>(triangles.size() / 3); }

@@ -37,7 +37,8 @@ Eigen::Matrix3d Camera::K() const {
 bool Camera::valid() const {
   return std::isfinite(fx) && std::isfinite(fy) && std::isfinite(cx) && std::isfinite(cy) && fx >= kMinFocal &&
          fy >= kMinFocal && fx <= kMaxFocal && fy <= kMaxFocal && width > 0 && height > 0 && width <= kMaxSize &&
-         height <= kMaxSize && std::abs(cx) <= 10.0 * width && std::abs(cy) <= 10.0 * height;
+         height <= kMaxSize && std::abs(cx) <= 10.0 * width && std::abs(cy) <= 10.0 * height &&
+         fx <= kMaxPixelAspect * fy && fy <= kMaxPixelAspect * fx;
 }
 
 void Camera::validate() const {
@@ -45,7 +46,8 @@ void Camera::validate() const {
     std::ostringstream m;
     m << "camera: unusable intrinsics (fx=" << fx << ", fy=" << fy << ", cx=" << cx << ", cy=" << cy << ", " << width
       << "x" << height << "): focal lengths must be in [" << kMinFocal << ", " << kMaxFocal
-      << "] pixels, the size in [1, " << kMaxSize << "] and the principal point within 10 image sizes";
+      << "] pixels with fx / fy within [1/" << kMaxPixelAspect << ", " << kMaxPixelAspect << "], the size in [1, "
+      << kMaxSize << "] and the principal point within 10 image sizes";
     throw std::invalid_argument(m.str());
   }
 }

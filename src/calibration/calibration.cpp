@@ -1,6 +1,8 @@
 // Camera-to-robot calibration (calibration.hpp): captures become views of one pose for Refiner::refine_views().
 #include "diffdope/calibration.hpp"
 
+#include "diffdope/input_limits.hpp"
+
 #include <opencv2/imgproc.hpp>
 
 #include <algorithm>
@@ -68,6 +70,9 @@ CalibrationResult Calibrator::calibrate(const RobotModel& robot, const std::vect
                                         const Pose& initial) {
   const auto start = std::chrono::steady_clock::now();
   if (captures.empty()) throw std::invalid_argument("calibrate: no capture");
+  if (captures.size() > size_t(input_limits::kMaxCaptures))
+    throw std::invalid_argument("calibrate: " + std::to_string(captures.size()) + " captures; at most " +
+                                std::to_string(input_limits::kMaxCaptures) + " (input_limits.hpp)");
   if (!initial.is_valid(1e-4)) throw std::invalid_argument("calibrate: the initial transform is not a valid pose");
   std::vector<Mesh> posed;
   posed.reserve(captures.size());

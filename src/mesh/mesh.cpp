@@ -3,6 +3,7 @@
 #include <atomic>
 #include <Eigen/Geometry>
 #include <algorithm>
+#include <sstream>
 #include <cmath>
 #include <stdexcept>
 #include <opencv2/imgproc.hpp>
@@ -187,9 +188,18 @@ void Mesh::finalize() {
   const int nv = num_vertices(), nt = num_triangles();
   for (int idx : triangles)
     if (idx < 0 || idx >= nv) throw std::runtime_error(who + "triangle index " + std::to_string(idx) + " out of range");
-  for (const Vec3f& p : positions)
+  for (size_t v = 0; v < positions.size(); ++v) {
+    const Vec3f& p = positions[v];
     if (!std::isfinite(p.x) || !std::isfinite(p.y) || !std::isfinite(p.z))
       throw std::runtime_error(who + "vertex position is not finite");
+    // Far beyond any object or robot: a wrong unit or a corrupt value, whose squares would overflow later.
+    if (std::max({std::abs(p.x), std::abs(p.y), std::abs(p.z)}) > kMaxVertexCoordinate) {
+      std::ostringstream m;
+      m << who << "vertex " << v << " is at (" << p.x << ", " << p.y << ", " << p.z << ") m: more than "
+        << kMaxVertexCoordinate << " m from the model's origin (a wrong unit or a corrupt value)";
+      throw std::runtime_error(m.str());
+    }
+  }
   if (!uvs.empty() && static_cast<int>(uvs.size()) != nv) throw std::runtime_error(who + "uv count != vertex count");
   if (colors.empty()) colors.assign(nv, Vec3f{0.7f, 0.7f, 0.7f});
   if (static_cast<int>(colors.size()) != nv) throw std::runtime_error(who + "colour count != vertex count");

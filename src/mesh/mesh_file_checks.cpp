@@ -99,6 +99,11 @@ void check_binary_ply_body(std::istream& in, PlyHeader& h) {
           h.body_error = "corrupt PLY: face " + std::to_string(r) + " has " + std::to_string(n) + " vertices";
           return;
         }
+        if (is_vertex_index_list(e, p) && n > kMaxPolygonVertices) {
+          h.body_error = "PLY " + e.name + " " + std::to_string(r) + " is a polygon of " + std::to_string(n) +
+                         " vertices: at most " + std::to_string(kMaxPolygonVertices) + " (triangulate it first)";
+          return;
+        }
       }
     }
   }
@@ -145,6 +150,11 @@ void check_ascii_ply_body(std::istream& in, PlyHeader& h) {
         const long long n = (long long)v;
         if (is_vertex_index_list(e, p) && e.name == "face" && n < 3) {
           h.body_error = "corrupt " + where() + ": a face of " + std::to_string(n) + " vertices";
+          return;
+        }
+        if (is_vertex_index_list(e, p) && n > kMaxPolygonVertices) {
+          h.body_error = where() + " is a polygon of " + std::to_string(n) + " vertices: at most " +
+                         std::to_string(kMaxPolygonVertices) + " (triangulate it first)";
           return;
         }
         for (long long k = 0; k < n; ++k) {
@@ -328,11 +338,27 @@ std::string outside_message(const std::string& model, const std::string& what, c
          "folders)";
 }
 
-void check_obj_materials(const std::string& path, const MeshLoadOptions& options) {
+void check_obj(const std::string& path, const MeshLoadOptions& options) {
   std::ifstream in(path);
   std::string line;
   const fs::path dir = fs::path(path).parent_path();
-  for (int n = 0; n < 10000000 && std::getline(in, line); ++n) {
+  long long vertices = 0, triangles = 0;
+  while (std::getline(in, line)) {
+    // Counted before assimp reads the file: it would allocate for all of them first (a bad_alloc, not the limit).
+    if (line.size() > 2 && line[0] == 'v' && (line[1] == ' ' || line[1] == '\t')) {
+      ++vertices;
+      continue;
+    }
+    if (line.size() > 2 && line[0] == 'f' && (line[1] == ' ' || line[1] == '\t')) {
+      std::istringstream corners(line.substr(2));
+      long long n = 0;
+      for (std::string c; corners >> c;) ++n;
+      if (n > kMaxPolygonVertices)
+        fail(path, "a face of " + std::to_string(n) + " vertices: at most " + std::to_string(kMaxPolygonVertices) +
+                       " (triangulate it first)");
+      triangles += std::max(n - 2, 0LL);
+      continue;
+    }
     const std::string t = trim(line);
     if (t.rfind("mtllib", 0) != 0 || t.size() < 7 || !std::isspace(static_cast<unsigned char>(t[6]))) continue;
     const std::string lib = trim(t.substr(6));
@@ -347,6 +373,10 @@ void check_obj_materials(const std::string& path, const MeshLoadOptions& options
     if (!in_resource_dirs(path, file.string(), options)) fail(path, outside_message(path, "material library", lib, file.string()));
     if (!fs::is_regular_file(file, ec)) fail(path, "material library '" + lib + "' is not a regular file");
   }
+  if (vertices > options.max_vertices || triangles > options.max_triangles)
+    fail(path, std::to_string(vertices) + " vertices and " + std::to_string(triangles) +
+                   " triangles: more than the limit (MeshLoadOptions: " + std::to_string(options.max_vertices) +
+                   " vertices, " + std::to_string(options.max_triangles) + " triangles); simplify the mesh");
 }
 
 void check_gltf_uris(const std::string& path, const MeshLoadOptions& options) {

@@ -64,9 +64,14 @@ bool in_resource_dirs(const std::string& model, const std::string& file, const M
 std::string outside_message(const std::string& model, const std::string& what, const std::string& ref,
                             const std::string& file);
 
-/// OBJ: a material library it names must exist (else assimp loads the mesh grey without a word), be a regular
-/// file and lie in the resource folders.
-void check_obj_materials(const std::string& path, const MeshLoadOptions& options);
+/// A polygon's vertices at most (PLY, OBJ): assimp's triangulation of an n-gon costs n^2, and a scan's faces are
+/// triangles or small polygons.
+constexpr long long kMaxPolygonVertices = 1024;
+
+/// OBJ: vertex and triangle counts within the options' limits, no polygon beyond kMaxPolygonVertices; a material
+/// library it names must exist (else assimp loads the mesh grey without a word), be a regular file and lie in the
+/// resource folders.
+void check_obj(const std::string& path, const MeshLoadOptions& options);
 
 /// glTF: every buffer and image it names by URI (not data: URIs) must be a regular file in the resource folders
 /// (assimp opens them itself, a pipe would hang it).

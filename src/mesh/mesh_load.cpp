@@ -151,7 +151,7 @@ Mesh Mesh::load(const std::string& path, const MeshLoadOptions& options) {
   PlyHeader ply;
   if (is_ply) ply = check_ply(path, options);
   if (ext == ".glb") check_glb(path);
-  if (ext == ".obj") check_obj_materials(path, options);
+  if (ext == ".obj") check_obj(path, options);
   if (ext == ".gltf") check_gltf_uris(path, options);
 
   ImportedModel model;

@@ -25,6 +25,7 @@
 
 #include "diffdope/calibration.hpp"
 #include "diffdope/input_files.hpp"
+#include "diffdope/input_limits.hpp"
 #include "diffdope/procedural.hpp"
 #include "diffdope/procedural_robot.hpp"
 #include "diffdope/synthetic.hpp"
@@ -180,6 +181,9 @@ std::vector<CalibrationCapture> read_captures(const Args& a) {
     if (e.is_directory()) dirs.push_back(e.path());
   std::sort(dirs.begin(), dirs.end());
   if (dirs.empty()) fail(a.captures, "no capture folder in it (one folder per capture: depth.png, joints.json)");
+  if (dirs.size() > size_t(input_limits::kMaxCaptures))  // (before any is read: each costs its images' memory)
+    fail(a.captures, std::to_string(dirs.size()) + " capture folders; at most " +
+                         std::to_string(input_limits::kMaxCaptures) + " (three to ten constrain every direction)");
   std::vector<CalibrationCapture> out;
   Camera cam;
   for (const fs::path& d : dirs) {

@@ -71,9 +71,12 @@ void check_init_in_view(const std::string& path, const Pose& pose, const Mesh& m
   }
   const Eigen::Vector3d c = pose * mesh.center();
   const std::string hint = pose.t.norm() > 20 ? " (t is in metres: was it given in millimetres?)" : "";
-  if (!(c.z() > near_plane))
+  if (!(c.z() > 0))
     fail(path, "the initial pose puts the object behind the camera (centre z = " + std::to_string(c.z()) + " m)" +
                    hint);
+  if (!(c.z() > near_plane))
+    fail(path, "the initial pose puts the object's centre at z = " + fmt(c.z(), "%.3f") +
+                   " m, not beyond render.near_plane (" + fmt(near_plane, "%.3f") + " m, from the options)" + hint);
   const Eigen::AlignedBox2d b = cam.project_bounds(mesh.bbox_corners(pose), 1e-6);
   if (b.isEmpty()) return;  // straddles the camera plane: let the refiner judge
   const double x0 = b.min().x(), y0 = b.min().y(), x1 = b.max().x(), y1 = b.max().y();

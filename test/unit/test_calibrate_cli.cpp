@@ -105,6 +105,11 @@ TEST_F(CalibrateCli, CaptureErrorsNameTheFile) {
     std::ofstream(c / "00/joints.json") << "{\"name\": [\"joint1\"], \"position\": [\"fast\"]}";
     expect_error(run(args(c)), (c / "00/joints.json").string(), "expected a number");
   }
+  {  // more captures than one calibration takes: refused before any is read
+    const fs::path c = copy_captures("too_many");
+    for (int k = 10; k < 80; ++k) fs::create_directories(c / std::to_string(k));
+    expect_error(run(args(c)), c.string(), "capture folders; at most 64");
+  }
   {  // a depth file that is not an image
     const fs::path c = copy_captures("corrupt_depth");
     std::ofstream(c / "02/depth.png", std::ios::trunc) << "not a png";

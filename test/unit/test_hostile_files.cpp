@@ -14,6 +14,7 @@
 
 #include <atomic>
 #include <chrono>
+#include <cmath>
 #include <cstdint>
 #include <cstring>
 #include <filesystem>
@@ -288,6 +289,26 @@ TEST_F(HostileFiles, AModelReadsOnlyFromItsOwnFolder) {
   write("elsewhere/b.bin", std::string(36, '\0'));
   m = load_error(write("model/up.gltf", gltf("../elsewhere/b.bin")));
   EXPECT_NE(m.find("outside the model's folder"), std::string::npos) << m;
+}
+
+// An n-gon costs assimp's triangulation n^2 (a 5 MB file of 32k-gons ran the import child's full minute), and
+// assimp allocates for every face of an OBJ before anything checks the count.
+TEST_F(HostileFiles, HugePolygonsAndTooManyObjFacesAreRefusedBeforeImport) {
+  std::string ply = "ply\nformat ascii 1.0\nelement vertex 2000\nproperty float x\nproperty float y\n"
+                    "property float z\nelement face 1\nproperty list ushort int vertex_indices\nend_header\n";
+  for (int v = 0; v < 2000; ++v) ply += std::to_string(std::cos(v * 0.00314)) + " " + std::to_string(std::sin(v * 0.00314)) + " 0\n";
+  ply += "2000";
+  for (int v = 0; v < 2000; ++v) ply += " " + std::to_string(v);
+  std::string m = load_error(write("gon.ply", ply + "\n"));
+  EXPECT_NE(m.find("polygon of 2000 vertices: at most 1024"), std::string::npos) << m;
+  std::string obj = "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\n";
+  for (int f = 0; f < 50; ++f) obj += "f 1 2 3\nf 2 4 3\n";
+  MeshLoadOptions few;
+  few.max_triangles = 99;
+  m = load_error(write("many.obj", obj), few);
+  EXPECT_NE(m.find("100 triangles: more than the limit"), std::string::npos) << m;
+  few.max_triangles = 100;
+  EXPECT_EQ(load_error((dir_ / "many.obj").string(), few), "");
 }
 
 TEST_F(HostileFiles, ManyTexturesTogetherHaveABudget) {

@@ -132,7 +132,8 @@ TEST(InputLimits, CamerasThatCannotImageAnythingAreRefused) {
                                    Camera(1e30, 500, 319.5, 239.5, 640, 480),
                                    Camera(500, 500, 1e9, 239.5, 640, 480),
                                    Camera(500, 500, 319.5, kNaN, 640, 480),
-                                   Camera(500, 500, 319.5, 239.5, 100000, 480)};
+                                   Camera(500, 500, 319.5, 239.5, 100000, 480),
+                                   Camera(0.1, 1e7, 319.5, 239.5, 640, 480)};  // each in range, not a camera
   for (const Camera& c : bad)
     EXPECT_NE(invalid_argument_message([&] { c.validate(); }).find("camera: unusable intrinsics"), std::string::npos)
         << c.fx << " " << c.cx << " " << c.cy << " " << c.width;
@@ -154,6 +155,10 @@ TEST(InputLimits, PosesWithNothingToRefineAgainstAreRefused) {
   Pose aside = truth;
   aside.t = Eigen::Vector3d(1e3, 0, 0.5);
   EXPECT_NE(refiner.refine(cam, obs, mesh, aside).error.find("outside the image"), std::string::npos);
+  RefinerOptions deep_near = o;  // in front of the camera but not beyond the near plane: the option is named
+  deep_near.render.near_plane = 1.0;
+  Refiner near_refiner(deep_near);
+  EXPECT_NE(near_refiner.refine(cam, obs, mesh, truth).error.find("render.near_plane"), std::string::npos);
   Pose half_out = truth;  // partly outside the image is a legal start
   half_out.t.x() = 0.2;
   EXPECT_EQ(refiner.refine(cam, obs, mesh, half_out).error, "");
@@ -169,6 +174,15 @@ TEST(InputLimits, AMeshThatDrawsNothingIsRefusedWhenFinalized) {
     FAIL() << "a mesh of degenerate triangles was accepted";
   } catch (const std::runtime_error& e) {
     EXPECT_NE(std::string(e.what()).find("degenerate"), std::string::npos) << e.what();
+  }
+  // One vertex far beyond any object: named, rather than "degenerate" after its squares overflow.
+  m.positions = {{0, 0, 0}, {1, 0, 0}, {1e38f, 1, 0}};
+  m.triangles = {0, 1, 2};
+  try {
+    m.finalize();
+    FAIL() << "a vertex at 1e38 m was accepted";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("vertex 2 is at (1e+38, 1, 0) m"), std::string::npos) << e.what();
   }
 }
 

@@ -7,6 +7,8 @@
 #include "diffdope_ros/conversions.hpp"
 #include "ros/calibration/calibration_nodelet.hpp"
 
+#include "diffdope/input_limits.hpp"
+
 namespace diffdope_ros {
 namespace {
 
@@ -88,6 +90,9 @@ bool CalibrationNodelet::onTakeSample(std_srvs::Trigger::Request&, std_srvs::Tri
       return fail("the robot is in the configuration of sample " + std::to_string(k) + " (joints within " +
                   format_fixed(min_configuration_change_, 3) + " rad): move it elsewhere first");
   }
+  if (samples_.size() >= size_t(diffdope::input_limits::kMaxCaptures))
+    return fail("already " + std::to_string(samples_.size()) + " samples, the most one calibration takes: compute "
+                "or reset first");
   samples_.push_back(std::move(s));
   ++samples_taken_;
   res.success = true;

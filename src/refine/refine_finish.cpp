@@ -1,0 +1,271 @@
+// RefineRun::finish() (refine_run.hpp): the choice between the start's basin and the shape scan's candidate, the
+// polish, the print alignment, and the result's scores and verdict.
+#include <Eigen/Geometry>
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <opencv2/imgproc.hpp>
+
+#include "diffdope/print_alignment.hpp"
+#include "refine/refine_run.hpp"
+#include "refine/refine_schedule.hpp"
+
+namespace diffdope {
+
+PrintRegistration RefineRun::register_render(const RenderImage& img) const {
+  const Observation& obs = fine_[0].obs;
+  if (meshes_.size() != 1 || !obs.has_rgb()) return PrintRegistration();
+  // The object's interior where the observation shows it: 2 px inside the render's full coverage (the
+  // silhouette's gradients fit whenever the shape does) and, with a mask, inside the observed mask.
+  cv::Mat interior = img.coverage >= 0.999f;
+  if (has_mask_) interior &= cv::Mat(obs.mask >= 0.5f);
+  cv::erode(interior, interior, cv::getStructuringElement(cv::MORPH_RECT, cv::Size(5, 5)));
+  return register_print(obs.rgb, img.color, interior, 8, loss_.texture_epsilon);
+}
+
+double RefineRun::print_significance(Renderer& renderer, const Pose& pose) const {
+  // A continuous declared symmetry turns the print with the object: it cannot be registered along that axis.
+  if (meshes_.size() != 1 || !fine_[0].obs.has_rgb() || !meshes_[0]->symmetry.continuous.empty())
+    return std::numeric_limits<double>::quiet_NaN();
+  return register_render(renderer.render(fine_[0].cam, *meshes_[0], {pose}, fine_[0].obs.mask)[0]).significance();
+}
+
+double jump_margin(double angle) { return kJumpMargin * (1.0 + 4.0 * std::abs(angle) / M_PI); }
+
+bool jump_is_supported(const JumpEvidence& from, const JumpEvidence& to, double angle, bool weigh_print) {
+  if (!(to.loss < from.loss)) return false;
+  if (weigh_print && std::isfinite(from.print) && !std::isfinite(to.print)) return false;  // the print is lost
+  const bool weighed = weigh_print && std::isfinite(from.print) && std::isfinite(to.print);
+  if (weighed && to.print < from.print - kPrintContradiction) return false;
+  const double need = kClearPrint * (1.0 + std::abs(angle) / M_PI);
+  if (weighed && to.print >= need && to.print - std::max(from.print, 0.0) >= need) return true;
+  return to.loss < (1.0 - jump_margin(angle)) * from.loss;
+}
+
+bool turn_is_supported(double z_from, double z_to, bool weigh_print) {
+  if (!weigh_print || !std::isfinite(z_from)) return true;
+  return std::isfinite(z_to) && z_to >= z_from - kPrintContradiction;
+}
+
+void RefineRun::polish(Renderer& renderer, RefineResult& res) {
+  const RefinerOptions& o = options_;
+  const int iters = polish_iterations_;
+  if (iters <= 0 || o.iterations == 0 || !std::isfinite(res.loss.total)) return;  // (0 iterations: score the start)
+  // Small rates, doubling from lr_low: the descent's runs that won the coarse phase were often large-rate ones,
+  // whose decayed steps still hop around the minimum when the iterations end.
+  std::vector<Pose> poses(size_t(o.polish_runs), res.pose);
+  std::vector<LossValue> v;
+  int stale = 0;
+  for (int k = 0; k <= iters; ++k) {
+    if (k == 0) {  // every run starts at the result: one evaluation gives them all their first gradient
+      evaluate(renderer, {res.pose}, loss_, true, v, true);
+      const LossValue first = v[0];
+      v.assign(poses.size(), first);
+    } else {
+      evaluate(renderer, poses, loss_, k < iters, v, true);
+    }
+    const double decay = std::pow(o.lr_decay, double(k) / iters);
+    const double before = res.loss.total;
+    for (size_t j = 0; j < poses.size(); ++j)
+      if (v[j].total < res.loss.total) res.loss = v[j], res.pose = poses[j];
+    stale = res.loss.total < (1.0 - kPolishTolerance) * before ? 0 : stale + 1;
+    res.polish_iterations = k;
+    if (stale >= kPolishPatience) return;  // converged
+    for (size_t j = 0; j < poses.size(); ++j) {
+      if (k == iters || !std::isfinite(v[j].total)) continue;
+      const double rate = o.lr_low * std::pow(2.0, double(j)) * decay;
+      poses[j] = refiner_step(poses[j], v[j].gradient, rate, diameter_, poses[j] * pivot_model_);
+    }
+  }
+}
+
+int RefineRun::lowest(const RefineResult& res, int first, int last) const {
+  int best = -1;
+  for (int i = first; i < last; ++i)
+    if (best < 0 || res.run_losses[size_t(i)] < res.run_losses[size_t(best)]) best = i;
+  return best;
+}
+
+void RefineRun::take(RefineResult& res, int i) const {
+  res.winner = i;
+  res.pose = best_pose_[size_t(i)];
+  res.start = (source_[size_t(i)] >= 0 ? source_[size_t(i)] : i) % int(initials_.size());
+  res.initial_pose = initials_[size_t(res.start)];
+  res.loss = best_[size_t(i)];
+  res.history = res.run_histories[size_t(i)];
+}
+
+double RefineRun::ResultPrint::at(Renderer& renderer, const RefineResult& res) {
+  if (!known) z = run.print_significance(renderer, res.pose), known = true;
+  return z;
+}
+
+RefineResult RefineRun::finish(Renderer& renderer) {
+  RefineResult res = std::move(res_);
+  const int runs = int(best_.size());
+  res.run_losses.resize(size_t(runs));
+  for (int i = 0; i < runs; ++i) res.run_losses[size_t(i)] = best_[size_t(i)].total;
+  res.run_poses = best_pose_;
+  take(res, lowest(res, 0, options_.batch_size));  // the start's own basin
+  if (switch_at_ > 0) weigh_starts(renderer, res);
+  ResultPrint print{*this};
+  weigh_candidate(renderer, res, print);
+  const Pose before_polish = res.pose;
+  polish(renderer, res);
+  if (!(res.pose.R == before_polish.R && res.pose.t == before_polish.t)) print.known = false;  // measured elsewhere
+  align_result_print(renderer, res, print);
+  // Of the poses a declared symmetry makes equivalent, the one nearest the start: a track does not spin.
+  if (meshes_.size() == 1) res.pose = meshes_.front()->symmetry.nearest_equivalent(res.pose, res.initial_pose.R);
+  const int rendered_pixels = score_views(renderer, res);
+  judge_result(renderer, res, rendered_pixels);
+  return res;
+}
+
+void RefineRun::weigh_starts(Renderer& renderer, RefineResult& res) {
+  // The first iteration was at the coarse scale: the initial loss at the fine one, of the starts that got a run
+  // (as at k = 0).
+  std::vector<LossValue> v;
+  const int starts = std::min(int(initials_.size()), options_.batch_size);
+  const std::vector<Pose> started(initials_.begin(), initials_.begin() + starts);
+  evaluate(renderer, started, loss_, false, v, true);
+  const size_t j = size_t(std::min_element(v.begin(), v.end(), [](auto& a, auto& b) { return a.total < b.total; }) - v.begin());
+  res.initial_loss = v[j].total;
+  // The start is a pose seen too (at k = 0, at the coarse scale): when no run's fine-phase best beats it (a
+  // start that was already right: a track), it is the result, from the run that started there.
+  if (v[j].total < res.loss.total) {
+    res.winner = int(j);
+    res.start = int(j);
+    res.pose = res.initial_pose = initials_[j];
+    res.loss = v[j];
+    res.run_losses[j] = v[j].total;
+    res.history = res.run_histories[j];
+  }
+}
+
+void RefineRun::weigh_candidate(Renderer& renderer, RefineResult& res, ResultPrint& print) {
+  // A shape-scan candidate replaces the start's basin only when, both converged, the evidence is clear enough
+  // for how far it jumps (jump_is_supported): silhouette and depth barely tell such turns apart.
+  const int candidate = lowest(res, options_.batch_size, int(best_.size()));
+  if (candidate < 0) return;
+  const double candidate_loss = res.run_losses[size_t(candidate)];
+  if (!std::isfinite(res.loss.total) && std::isfinite(candidate_loss)) {
+    take(res, candidate);  // every run from the starts left the image: the candidate is all there is
+    res.scan_taken = true;
+  } else if (std::isfinite(res.loss.total) && candidate_loss < res.loss.total) {
+    const JumpEvidence basin{res.loss.total, print.at(renderer, res)};
+    const JumpEvidence jump{candidate_loss, print_significance(renderer, best_pose_[size_t(candidate)])};
+    if (jump_is_supported(basin, jump, jump_angle_[size_t(candidate)], options_.min_print_significance > 0)) {
+      take(res, candidate);
+      res.scan_taken = true;
+      print.z = jump.print, print.known = true;
+    }
+  }
+}
+
+void RefineRun::align_result_print(Renderer& renderer, RefineResult& res, ResultPrint& print) {
+  // The turn may cost up to kPrintLossTolerance of loss only because a mask or depth holds every other degree of
+  // freedom: with RGB alone that loss is the print comparison itself, and a turn that moves the handle (unseen
+  // without a mask) to where the print fits slightly better would be taken 30-40 degrees from the truth.
+  const Observation& obs0 = fine_[0].obs;
+  if (meshes_.size() != 1 || !std::isfinite(res.loss.total) || !obs0.has_texture() ||
+      !(has_mask_ || obs0.has_depth()))
+    return;
+  LossOptions with_print = loss_;
+  with_print.weight_texture = 1.0;
+  const PrintEvaluator evaluate_print = [&](const std::vector<Pose>& poses, std::vector<LossValue>& out) {
+    evaluate(renderer, poses, with_print, false, out, true);
+  };
+  Pose aligned = res.pose;
+  bool turned = false;
+  for (const ShapeRotation& axis : print_axes_) {
+    const PrintAlignment a = align_print(aligned, axis, print_range_, loss_.weight_texture, evaluate_print);
+    aligned = a.pose;
+    turned = turned || a.angle != 0;
+  }
+  if (!turned) return;
+  std::vector<LossValue> v;
+  evaluate(renderer, {aligned}, loss_, false, v, true);
+  const double angle = Eigen::AngleAxisd(res.pose.R.transpose() * aligned.R).angle();
+  // The turns of several axes together may cost no more than one may (kPrintLossTolerance), and the print's
+  // registration must not contradict the turn (turn_is_supported).
+  if (v[0].total <= (1.0 + kPrintLossTolerance) * res.loss.total &&
+      turn_is_supported(print.at(renderer, res), print_significance(renderer, aligned),
+                        options_.min_print_significance > 0)) {
+    res.print_turn = angle;
+    res.pose = aligned;
+    res.loss = v[0];
+  }
+}
+
+int RefineRun::score_views(Renderer& renderer, RefineResult& res) const {
+  // Quality scores at the refined pose, per view; the result's are the weakest view's.
+  const bool one_view = meshes_.size() == 1;
+  int rendered_pixels = 0;
+  for (size_t v = 0; v < meshes_.size(); ++v) {
+    const Camera& cam = fine_[v].cam;
+    const Observation& obs = fine_[v].obs;
+    RefineResult::ViewScores scores;
+    const RenderImage img = renderer.render(cam, *meshes_[v], {res.pose}, obs.mask)[0];
+    const cv::Mat rendered = img.coverage >= 0.5f;
+    rendered_pixels += cv::countNonZero(rendered);
+    if (has_mask_) {
+      // Where the observed depth shows an occluder in front of the render (as the loss's mask term), the object
+      // is hidden: its visible mask rightly leaves it out, so the render's IoU leaves it out too.
+      cv::Mat visible = rendered;
+      if (obs.has_depth() && loss_.occlusion_margin > 0) {
+        cv::Mat in_front = (obs.depth > 0) & (obs.depth < img.depth - loss_.occlusion_margin);
+        visible = rendered & ~in_front;
+      }
+      const cv::Mat observed_mask = obs.mask >= 0.5f;
+      const double inter = cv::countNonZero(visible & observed_mask), uni = cv::countNonZero(visible | observed_mask);
+      scores.mask_iou = uni > 0 ? inter / uni : 0.0;
+    }
+    if (obs.has_depth()) {
+      // Over the observed object, or (without a mask) over what the render covers: the window is not the object.
+      const cv::Mat object = (has_mask_ ? cv::Mat(obs.mask >= 0.5f) : rendered) & (obs.depth > 0);
+      const int n = cv::countNonZero(object);
+      cv::Mat diff;
+      cv::absdiff(obs.depth, img.depth, diff);
+      const cv::Mat inlier = object & (img.depth > 0) & (diff < options_.inlier_threshold);
+      scores.depth_inliers = n > 0 ? double(cv::countNonZero(inlier)) / n : 0.0;
+    }
+    if (one_view && obs.has_rgb()) res.print = register_render(img);
+    if (!one_view) {
+      std::vector<LossValue> value;
+      renderer.evaluate(cam, *meshes_[v], obs, {res.pose}, loss_, false, value);
+      scores.loss = value[0].total;
+    }
+    const auto weakest = [](double a, double b) { return a < 0 ? b : b < 0 ? a : std::min(a, b); };
+    res.mask_iou = v == 0 ? scores.mask_iou : weakest(res.mask_iou, scores.mask_iou);
+    res.depth_inliers = v == 0 ? scores.depth_inliers : weakest(res.depth_inliers, scores.depth_inliers);
+    if (!one_view) res.view_scores.push_back(scores);
+  }
+  return rendered_pixels;
+}
+
+void RefineRun::judge_result(Renderer& renderer, RefineResult& res, int rendered_pixels) const {
+  const RefinerOptions& o = options_;
+  const bool one_view = meshes_.size() == 1;
+  const Mesh& mesh0 = *meshes_.front();
+  if (one_view && o.probe_distance > 0 && std::isfinite(res.loss.total))
+    res.curvature = probe_pose_curvature(renderer, fine_[0].cam, mesh0, fine_[0].obs, loss_, res.pose,
+                                         o.probe_distance, mesh0.symmetry.free_twists(res.pose, res.pose * mesh0.center()));
+  res.pivot = res.pose * pivot_model_;
+  res.covariance = pose_covariance(res.curvature, rendered_pixels, diameter_);
+  const size_t n = res.history.size(), tail = std::max<size_t>(2, n / 10);
+  if (n >= tail) {
+    const double a = res.history[n - tail], b = res.history.back();
+    res.converged = std::abs(a - b) <= 0.01 * std::max(std::abs(a), 1e-12);
+  }
+  VerdictEvidence evidence;
+  evidence.mask_iou = res.mask_iou;
+  evidence.depth_inliers = res.depth_inliers;
+  // A continuous declared symmetry turns the print with the object: it cannot be registered along that axis.
+  if (one_view && mesh0.symmetry.continuous.empty()) evidence.print_significance = res.print.significance();
+  const Verdict verdict = judge(evidence, o.min_mask_iou, o.min_depth_inliers, o.min_print_significance);
+  res.plausible = std::isfinite(res.loss.total) && verdict.plausible;
+  res.confidence = std::isfinite(res.loss.total) ? verdict.confidence : 0.0;
+  res.time_ms = milliseconds_since(start_time_);
+}
+
+}  // namespace diffdope
