@@ -17,8 +17,8 @@ constexpr std::uintmax_t kMaxTextFileBytes = std::uintmax_t(64) << 20;
 /// Pixels of an input image (rgb, depth, mask), read from the file's header before decoding: 2^25 (e.g.
 /// 8192 x 4096) is beyond any depth camera and keeps a decoded float RGB copy under 0.5 GB.
 constexpr long long kMaxImagePixels = 1LL << 25;
-/// Size of an image file (compressed).
-constexpr std::uintmax_t kMaxImageFileBytes = std::uintmax_t(1) << 30;
+/// Size of an image file, input or texture (compressed; an uncompressed 8192^2 RGB PNG is 200 MB).
+constexpr std::uintmax_t kMaxImageFileBytes = std::uintmax_t(256) << 20;
 
 /// Captures of one calibration (files, or the node's samples): three to ten constrain every direction; each holds
 /// its images as floats (about 5 MB at 640 x 480), so hundreds would only cost memory.

@@ -123,7 +123,8 @@ cv::Mat read_image_file(const std::string& path, int flags, const std::string& k
   const std::uintmax_t size = fs::file_size(path, ec);
   if (ec) throw InputFileError(path, "cannot read the " + kind + " image (" + ec.message() + ")");
   if (size > input_limits::kMaxImageFileBytes)
-    throw InputFileError(path, "the " + kind + " image is a file of more than 1 GB");
+    throw InputFileError(path, "the " + kind + " image is a file of more than " +
+                                   std::to_string(input_limits::kMaxImageFileBytes >> 20) + " MB");
   std::ifstream in(path, std::ios::binary);
   std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
   if (!in.good() && !in.eof()) throw InputFileError(path, "cannot read the " + kind + " image");

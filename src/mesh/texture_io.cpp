@@ -17,6 +17,7 @@
 #include "mesh/mesh_io_internal.hpp"
 
 #include "diffdope/image_file.hpp"
+#include "diffdope/input_limits.hpp"
 
 namespace diffdope {
 namespace mesh_io {
@@ -73,7 +74,9 @@ Texture decode_texture(const std::string& model, const TextureSource& src, const
       std::error_code ec;
       const auto size = fs::file_size(src.file, ec);
       if (ec) fail(model, "cannot read " + name + " (" + src.file + ")");
-      if (size > (uint64_t(1) << 30)) fail(model, name + " is a file of more than 1 GB");
+      if (size > input_limits::kMaxImageFileBytes)
+        fail(model, name + " is a file of more than " + std::to_string(input_limits::kMaxImageFileBytes >> 20) +
+                        " MB (input_limits.hpp)");
       std::ifstream in(src.file, std::ios::binary);
       bytes.assign(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
       if (!in.good() && !in.eof()) fail(model, "cannot read " + name + " (" + src.file + ")");

@@ -136,13 +136,13 @@ int generate(const std::string& dir, int count, uint64_t seed, double init_cm, d
 
 std::map<std::string, double> read_joints(const std::string& path) {
   check_file(path);
-  std::ifstream in(path);
-  nlohmann::json j;
+  std::string text;
   try {
-    in >> j;
+    text = read_text_file(path, "a joints file");
   } catch (const std::exception& e) {
-    fail(path, "not valid JSON (" + one_line(e.what()) + ")");
+    fail(path, one_line(e.what()));
   }
+  const nlohmann::json j = parse_json_checked(text, path);  // (nesting bounded; errors name the file)
   std::map<std::string, double> q;
   const auto number = [&](const std::string& name, const nlohmann::json& v) {
     if (!v.is_number()) fail(path, "joint '" + name + "': expected a number");

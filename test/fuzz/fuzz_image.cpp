@@ -11,7 +11,7 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   const std::string path = fuzz::write("image", std::string(reinterpret_cast<const char*>(data), size));
   // (A small pixel limit keeps each run fast; the checks are the same at any limit.)
   constexpr long long kMaxPixels = 1 << 20;
-  for (const int flags : {cv::IMREAD_COLOR, cv::IMREAD_ANYDEPTH | cv::IMREAD_ANYCOLOR}) {
+  for (const int flags : {int(cv::IMREAD_COLOR), int(cv::IMREAD_ANYDEPTH | cv::IMREAD_ANYCOLOR)}) {
     try {
       const cv::Mat m = diffdope::read_image_file(path, flags, "rgb", kMaxPixels);
       if (m.empty() || m.total() > size_t(kMaxPixels)) __builtin_trap();  // refused, or within the limit

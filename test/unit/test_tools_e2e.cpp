@@ -103,6 +103,11 @@ TEST(ToolsEndToEnd, EvalSkipsWhatItCannotUseAndScoresTheRest) {
   c["0"]["cam_K"] = std::vector<double>(9, 0.0);
   std::ofstream(cams) << c.dump();
   cv::imwrite((fs::path(root) / "test/000002/mask_visib/000000_000000.png").string(), cv::Mat::zeros(10, 10, CV_8U));
+  // An object id beyond int: named, not truncated to another id and scored.
+  const fs::path gts = fs::path(root) / "test/000003/scene_gt.json";
+  json g = json::parse(std::ifstream(gts));
+  g["0"][0]["obj_id"] = 4294967297LL;
+  std::ofstream(gts) << g.dump();
   const std::string cfg = (tmp.path / "small.yaml").string();
   std::ofstream(cfg) << "batch_size: 4\niterations: 10\n";
   const std::string out = (tmp.path / "res.jsonl").string(), err = (tmp.path / "err.txt").string();
@@ -115,13 +120,14 @@ TEST(ToolsEndToEnd, EvalSkipsWhatItCannotUseAndScoresTheRest) {
   EXPECT_NE(text.find(cams.string() + " (image 0): cam_K"), std::string::npos) << text;
   EXPECT_NE(text.find("scene 1 skipped"), std::string::npos) << text;
   EXPECT_NE(text.find("test/000002 (image 0, instance 0): mask: image is 10x10"), std::string::npos) << text;
+  EXPECT_NE(text.find("obj_id 4294967297 is outside"), std::string::npos) << text;
   std::ifstream lines(out);
   int scored = 0;
   for (std::string line; std::getline(lines, line);) {
-    EXPECT_NE(json::parse(line)["scene_id"].get<int>(), 1);
+    EXPECT_EQ(json::parse(line)["scene_id"].get<int>(), 2);
     ++scored;
   }
-  EXPECT_GE(scored, 2);  // scene 2's other objects and scene 3's
+  EXPECT_GE(scored, 1);  // scene 2's other objects
 }
 
 TEST(ToolsEndToEnd, GeneratorArgumentsAreCheckedNotThrown) {
