@@ -89,21 +89,17 @@ void count_yaml_nodes(const YAML::Node& n, const std::string& origin, long long&
   }
 }
 
-/// `nodes`: what the file may still expand to (an alias is expanded each time it is used).
-json yaml_to_json(const YAML::Node& n, const std::string& path, long long& nodes, int depth = 0) {
-  if (depth > kMaxNesting) fail(path, "nested deeper than " + std::to_string(kMaxNesting) + " levels");
-  if (--nodes < 0)
-    fail(path, "expands to more than " + std::to_string(input_limits::kMaxYamlNodes) +
-                   " values (aliases counted each time they are used): not a camera file");
+/// (Call check_yaml_expansion() first: it bounds the depth and the size of what this builds.)
+json yaml_to_json(const YAML::Node& n, const std::string& path) {
   switch (n.Type()) {
     case YAML::NodeType::Map: {
       json j = json::object();
-      for (const auto& kv : n) j[kv.first.as<std::string>()] = yaml_to_json(kv.second, path, nodes, depth + 1);
+      for (const auto& kv : n) j[kv.first.as<std::string>()] = yaml_to_json(kv.second, path);
       return j;
     }
     case YAML::NodeType::Sequence: {
       json j = json::array();
-      for (const auto& e : n) j.push_back(yaml_to_json(e, path, nodes, depth + 1));
+      for (const auto& e : n) j.push_back(yaml_to_json(e, path));
       return j;
     }
     case YAML::NodeType::Scalar: {
@@ -121,8 +117,9 @@ json yaml_to_json(const YAML::Node& n, const std::string& path, long long& nodes
 json read_yaml_file(const std::string& path) {
   check_file(path);
   try {
-    long long nodes = input_limits::kMaxYamlNodes;
-    return yaml_to_json(YAML::LoadFile(path), path, nodes);
+    const YAML::Node root = YAML::LoadFile(path);
+    check_yaml_expansion(root, path);
+    return yaml_to_json(root, path);
   } catch (const YAML::Exception& e) {
     fail(path, std::string("invalid YAML: ") + e.what());
   }

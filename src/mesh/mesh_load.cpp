@@ -20,6 +20,8 @@
 #include "mesh/isolated_call.hpp"
 #include "mesh/mesh_io_internal.hpp"
 
+#include "diffdope/input_files.hpp"
+
 namespace diffdope {
 namespace mesh_io {
 
@@ -139,12 +141,10 @@ ImportedModel from_bytes(const std::string& bytes) {
 Mesh Mesh::load(const std::string& path, const MeshLoadOptions& options) {
   using namespace mesh_io;
   namespace fs = std::filesystem;
-  {
-    std::error_code ec;
-    if (!fs::exists(path, ec)) fail(path, "file does not exist");
-    if (!fs::is_regular_file(path, ec)) fail(path, "not a regular file");
-    std::ifstream probe(path, std::ios::binary);
-    if (!probe) fail(path, "file is not readable");
+  try {
+    check_input_file(path);  // (a pipe or device is refused before it is opened)
+  } catch (const InputFileError& e) {
+    fail(path, e.what());
   }
   const std::string ext = lower(fs::path(path).extension().string());
   const bool is_ply = ext == ".ply";

@@ -140,7 +140,7 @@ std::map<std::string, double> read_joints(const std::string& path) {
   try {
     text = read_text_file(path, "a joints file");
   } catch (const std::exception& e) {
-    fail(path, one_line(e.what()));
+    fail(path, strip_file_prefix(one_line(e.what()), path));
   }
   const nlohmann::json j = parse_json_checked(text, path);  // (nesting bounded; errors name the file)
   std::map<std::string, double> q;
