@@ -43,6 +43,8 @@ struct Pose {
 
 /// SE(3) exponential of delta = (rho, phi).
 Pose se3_exp(const Vector6d& delta);
+/// The cross-product matrix: skew(r) x = r x x.
+Eigen::Matrix3d skew(const Eigen::Vector3d& r);
 /// Rotation vector -> matrix (Rodrigues).
 Eigen::Matrix3d so3_exp(const Eigen::Vector3d& phi);
 /// Rotation angle between two rotations, radians.

@@ -29,7 +29,15 @@ Vector6d gradient_about(const Vector6d& camera_gradient, const Eigen::Vector3d& 
 /// mesh with area that is not a line.
 Matrix6d surface_displacement_metric(const Mesh& mesh, const Eigen::Matrix3d& R, const Eigen::Vector3d& pivot_model);
 
-/// Evaluations of one probe: a batch of 13 with gradients (±half the distance along the 6 metric axes, and the
+/// One image of a probed pose. Several views share the pose (a calibration's captures: one camera <- base, the
+/// robot in each capture's configuration); the probe weighs their mean loss, as Refiner::refine_views() does.
+struct ProbeView {
+  const Camera& camera;
+  const Mesh& mesh;
+  const Observation& observed;
+};
+
+/// Evaluations of one probe (per view): a batch of 13 with gradients (±half the distance along the 6 metric axes, and the
 /// pose), and one of 2 without (±the distance along the weakest direction).
 constexpr int kCurvatureProbeEvaluations = 15;
 
@@ -57,6 +65,11 @@ struct PoseCurvature {
 PoseCurvature probe_pose_curvature(Renderer& renderer, const Camera& camera, const Mesh& mesh,
                                    const Observation& observed, const LossOptions& loss, const Pose& pose,
                                    double distance, const std::vector<Vector6d>& free_twists = {});
+/// The same over several views of one pose, about the pivot pose * `pivot_model` (the meshes' common frame); the
+/// metric is the views' mean.
+PoseCurvature probe_pose_curvature(Renderer& renderer, const std::vector<ProbeView>& views, const LossOptions& loss,
+                                   const Pose& pose, const Eigen::Vector3d& pivot_model, double distance,
+                                   const std::vector<Vector6d>& free_twists = {});
 
 /// Neighbouring pixels' residuals are not independent (antialiasing, texture filtering, image resampling): the
 /// covariance counts one independent observation per this many pixels.

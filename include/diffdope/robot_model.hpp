@@ -4,6 +4,7 @@
 // way (calibration.hpp). Units: metres, radians (prismatic joints: metres).
 #include <map>
 #include <memory>
+#include <set>
 #include <string>
 #include <vector>
 
@@ -52,8 +53,12 @@ class RobotModel {
   /// Root (base) from every link at `positions` (joint name -> radians or metres; extra names are ignored).
   /// Throws std::invalid_argument naming a needed joint that is missing or not finite.
   std::map<std::string, Pose> link_poses(const std::map<std::string, double>& positions) const;
-  /// Every visual placed in the base frame at `positions` (for merge_meshes()).
-  std::vector<MeshPart> posed_visuals(const std::map<std::string, double>& positions) const;
+  /// Every visual placed in the base frame at `positions` (for merge_meshes()), but those of `leave_out`'s links.
+  std::vector<MeshPart> posed_visuals(const std::map<std::string, double>& positions,
+                                      const std::set<std::string>& leave_out = {}) const;
+  bool has_link(const std::string& link) const;
+  /// `link` and every link joined to it through fixed joints only (up and down the tree): what moves with it.
+  std::set<std::string> links_fixed_to(const std::string& link) const;
 
  private:
   double position_of(const Joint& j, const std::map<std::string, double>& positions) const;

@@ -5,6 +5,12 @@
 
 namespace diffdope {
 
+Eigen::Matrix3d skew(const Eigen::Vector3d& r) {
+  Eigen::Matrix3d S;
+  S << 0, -r.z(), r.y(), r.z(), 0, -r.x(), -r.y(), r.x(), 0;
+  return S;
+}
+
 Eigen::Matrix3d so3_exp(const Eigen::Vector3d& phi) {
   const double angle = phi.norm();
   if (angle < 1e-12) {  // first order; the error is O(angle^2) < 1e-24

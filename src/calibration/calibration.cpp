@@ -5,6 +5,8 @@
 
 #include <opencv2/imgproc.hpp>
 
+#include <Eigen/Eigenvalues>
+
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -19,7 +21,6 @@ RefinerOptions CalibrationOptions::default_refiner() {
   RefinerOptions o;
   o.loss.weight_rgb = 0;
   o.explore_tolerance = 0;
-  o.probe_distance = 0;
   o.iterations = 200;
   o.lr_low = 0.0002;
   o.lr_high = 0.006;
@@ -30,7 +31,10 @@ void CalibrationOptions::validate() const {
   refiner.validate();
   const OptionRange check{"calibration options"};
   check.above("mask_margin", mask_margin, 0, 1, " metres");
+  check.above("refined_mask_margin", refined_mask_margin, 0, mask_margin, " metres (at most mask_margin)");
   check("passes", passes, 1, 10);
+  check.above("later_pass_rates", later_pass_rates, 0, 1);
+  check.above("max_position_std", max_position_std, 0, 1, " metres");
 }
 
 Calibrator::Calibrator(const CalibrationOptions& options)
@@ -38,42 +42,26 @@ Calibrator::Calibrator(const CalibrationOptions& options)
       refiner_(options.refiner),
       renderer_(make_cpu_renderer(options.refiner.render)) {}
 
-cv::Mat Calibrator::derive_mask(const Mesh& posed_robot, const Camera& camera, const Observation& observed,
-                                const Pose& camera_from_base) {
-  observed.validate(camera);
-  if (!observed.has_depth()) throw std::invalid_argument("derive_mask: no depth image");
-  // The robot at the guess, full frame (what it covers, and at what depth).
-  const RenderImage img = renderer_->render(camera, posed_robot, {camera_from_base})[0];
-  cv::Mat covered = img.coverage >= 0.5f;
-  if (cv::countNonZero(covered) == 0) return cv::Mat::zeros(camera.height, camera.width, CV_32F);
-  double z_near = 0;
-  {
-    cv::Mat d = img.depth.clone();
-    d.setTo(std::numeric_limits<float>::infinity(), ~covered);
-    cv::minMaxLoc(d, &z_near);
-  }
-  const double margin = options_.mask_margin;
-  const int radius = std::clamp(int(std::ceil(margin * std::max(camera.fx, camera.fy) / std::max(z_near, 0.05))), 1, 200);
-  const cv::Mat kernel = cv::getStructuringElement(cv::MORPH_RECT, cv::Size(2 * radius + 1, 2 * radius + 1));
-  cv::Mat nearest = img.depth.clone(), farthest = img.depth.clone();
-  nearest.setTo(std::numeric_limits<float>::infinity(), ~covered);
-  cv::erode(nearest, nearest, kernel);     // smallest robot depth around each pixel
-  cv::dilate(farthest, farthest, kernel);  // largest
-  const cv::Mat d = observed.depth;
-  cv::Mat mask = (d > 0) & (d >= nearest - margin) & (d <= farthest + margin) & (farthest > 0);
-  cv::Mat out;
-  mask.convertTo(out, CV_32F, 1.0 / 255.0);
-  return out;
+std::vector<MeshPart> CameraMount::posed_robot(const RobotModel& robot,
+                                               const std::map<std::string, double>& joint_positions) const {
+  if (!eye_in_hand()) return robot.posed_visuals(joint_positions);
+  if (!robot.has_link(link)) throw std::invalid_argument("the robot has no link '" + link + "' to carry the camera");
+  std::vector<MeshPart> parts = robot.posed_visuals(joint_positions, robot.links_fixed_to(link));
+  const Pose link_from_base = robot.link_poses(joint_positions).at(link).inverse();
+  for (MeshPart& p : parts) p.pose = link_from_base * p.pose;
+  return parts;
 }
 
 CalibrationResult Calibrator::calibrate(const RobotModel& robot, const std::vector<CalibrationCapture>& captures,
-                                        const Pose& initial) {
+                                        const Pose& initial, const CameraMount& mount) {
   const auto start = std::chrono::steady_clock::now();
   if (captures.empty()) throw std::invalid_argument("calibrate: no capture");
   if (captures.size() > size_t(input_limits::kMaxCaptures))
     throw std::invalid_argument("calibrate: " + std::to_string(captures.size()) + " captures; at most " +
                                 std::to_string(input_limits::kMaxCaptures) + " (input_limits.hpp)");
   if (!initial.is_valid(1e-4)) throw std::invalid_argument("calibrate: the initial transform is not a valid pose");
+  if (mount.eye_in_hand() && !robot.has_link(mount.link))
+    throw std::invalid_argument("calibrate: the robot has no link '" + mount.link + "' to carry the camera");
   std::vector<Mesh> posed;
   posed.reserve(captures.size());
   std::vector<RefineView> views;
@@ -84,7 +72,10 @@ CalibrationResult Calibrator::calibrate(const RobotModel& robot, const std::vect
     try {
       c.observed.validate(c.camera);
       if (!c.observed.has_depth()) throw std::invalid_argument("no depth image (calibration needs depth)");
-      posed.push_back(merge_meshes(robot.posed_visuals(c.joint_positions), robot.name() + " at " + c.name));
+      posed.push_back(merge_meshes(mount.posed_robot(robot, c.joint_positions), robot.name() + " at " + c.name));
+      if (posed.back().num_triangles() == 0)
+        throw std::invalid_argument("every link with a visual is fixed to the camera's link '" + mount.link +
+                                    "': nothing moves in the image");
     } catch (const std::exception& e) {
       throw std::invalid_argument(who + e.what());
     }
@@ -97,7 +88,7 @@ CalibrationResult Calibrator::calibrate(const RobotModel& robot, const std::vect
       throw std::invalid_argument("calibrate: either every capture has a mask or none (capture '" + c.name + "')");
     RefineView v{c.camera, c.observed, &posed[k]};
     if (!with_masks) {
-      v.observed.mask = derive_mask(posed[k], c.camera, c.observed, initial);
+      v.observed.mask = derive_mask(posed[k], c.camera, c.observed, initial, options_.mask_margin);
       if (cv::countNonZero(v.observed.mask) == 0)
         throw std::invalid_argument("capture '" + c.name +
                                     "': no observed depth near the robot at the initial guess (is it in view?)");
@@ -107,21 +98,28 @@ CalibrationResult Calibrator::calibrate(const RobotModel& robot, const std::vect
   }
   centre /= double(captures.size());
   CalibrationResult out;
-  out.initial_camera_from_base = initial;
+  out.initial_camera_from_mount = initial;
+  out.mount_frame = mount.eye_in_hand() ? mount.link : robot.root_link();
   Pose from = initial;
   for (int pass = 0; pass < options_.passes; ++pass) {
+    if (pass > 0 && !with_masks)  // around the pass before's result, closer: less of what stands near the robot
+      for (size_t k = 0; k < captures.size(); ++k) {
+        cv::Mat mask = derive_mask(posed[k], captures[k].camera, captures[k].observed, from,
+                                   options_.refined_mask_margin);
+        if (cv::countNonZero(mask) > 0) views[k].observed.mask = mask;
+      }
     refiner_.on_iteration = nullptr;
     if (on_iteration)
       refiner_.on_iteration = [this, pass](int k, int total, double loss) { on_iteration(pass, k, total, loss); };
-    out.refine = refiner_.refine_views(views, {from}, centre);
+    out.refine = refiner_.refine_views(views, {from}, centre,
+                                       pass_options(pass, (from * centre).norm(), captures.front().camera));
     if (!out.refine.error.empty()) throw std::invalid_argument("calibrate: " + out.refine.error);
     from = out.refine.pose;
     ++out.passes;
   }
   refiner_.on_iteration = nullptr;
-  out.camera_from_base = out.refine.pose;
-  out.plausible = out.refine.plausible;
-  out.confidence = out.refine.confidence;
+  out.camera_from_mount = out.refine.pose;
+  judge_firmness(out);
   // Per capture: the refiner's scores and the median depth residual at the result.
   const double scale = refiner_.options().image_scale;
   for (size_t k = 0; k < captures.size(); ++k) {
@@ -139,7 +137,7 @@ CalibrationResult Calibrator::calibrate(const RobotModel& robot, const std::vect
     }
     const Camera cam = scale == 1.0 ? views[k].camera : views[k].camera.scaled(scale);
     const Observation obs = scale == 1.0 ? views[k].observed : views[k].observed.resized(cam);
-    const RenderImage img = renderer_->render(cam, posed[k], {out.camera_from_base})[0];
+    const RenderImage img = renderer_->render(cam, posed[k], {out.camera_from_mount})[0];
     std::vector<float> diffs;
     for (int y = 0; y < cam.height; ++y)
       for (int x = 0; x < cam.width; ++x) {
@@ -157,29 +155,66 @@ CalibrationResult Calibrator::calibrate(const RobotModel& robot, const std::vect
   return out;
 }
 
-std::string easy_handeye_yaml(const Pose& base_from_camera, const std::string& base, const std::string& camera) {
-  const auto q = base_from_camera.quaternion_xyzw();
+RefinerOptions Calibrator::pass_options(int pass, double robot_distance, const Camera& camera) const {
+  RefinerOptions o = options_.refiner;
+  // Each pass continues the decay of the one before: rates later_pass_rates^pass of the first's.
+  const double rate_scale = std::pow(options_.later_pass_rates, pass);
+  o.lr_low *= rate_scale;
+  o.lr_high *= rate_scale;
+  // The curvature probe (judge_firmness) moves the robot's image by about two of the refiner's pixels at its
+  // centre, at most refiner.probe_distance: the render's gradients see a silhouette move that far, not tens of
+  // pixels (a camera on the hand sees links a few decimetres away).
+  const double pixel = std::max(robot_distance, 0.05) / (camera.fx * o.image_scale);
+  o.probe_distance = std::min(o.probe_distance, 2 * pixel);
+  return o;
+}
+
+void Calibrator::judge_firmness(CalibrationResult& out) const {
+  out.plausible = out.refine.plausible;
+  out.confidence = out.refine.confidence;
+  if (!out.refine.curvature.valid) return;
+  // The twist (v, w) about the pivot p moves the camera's origin, relative to the robot, by -(v + p x w).
+  const Matrix6d& cov = out.refine.covariance;
+  Eigen::Matrix<double, 3, 6> J;
+  J << Eigen::Matrix3d::Identity(), skew(out.refine.pivot);
+  const Eigen::Matrix3d position_cov = J * cov * J.transpose();
+  const Eigen::Matrix3d rotation_cov = cov.bottomRightCorner<3, 3>();
+  const auto largest_std = [](const Eigen::Matrix3d& c) {
+    return std::sqrt(std::max(0.0, Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d>(c).eigenvalues()[2]));
+  };
+  out.position_std = largest_std(position_cov);
+  out.rotation_std = largest_std(rotation_cov);
+  const double ratio = out.position_std / options_.max_position_std;
+  out.plausible = out.plausible && ratio <= 1;
+  out.confidence = std::min(out.confidence, 1 / (1 + ratio * ratio));
+}
+
+std::string easy_handeye_yaml(const Pose& mount_from_camera, const std::string& mount, const std::string& camera,
+                              bool eye_on_hand) {
+  const auto q = mount_from_camera.quaternion_xyzw();
   std::ostringstream y;
   y.precision(9);
-  y << "# diffdope_ros calibration: the camera's pose in the robot base frame (easy_handeye's layout, eye on base).\n"
-    << "eye_on_hand: false\nrobot_base_frame: " << base << "\ntracking_base_frame: " << camera
-    << "\ntransformation:\n  x: " << base_from_camera.t.x() << "\n  y: " << base_from_camera.t.y()
-    << "\n  z: " << base_from_camera.t.z() << "\n  qx: " << q[0] << "\n  qy: " << q[1] << "\n  qz: " << q[2]
+  y << "# diffdope_ros calibration: the camera's pose in the " << (eye_on_hand ? "robot's link " : "robot base frame ")
+    << mount << " (easy_handeye's layout, eye on " << (eye_on_hand ? "hand" : "base") << ").\neye_on_hand: "
+    << (eye_on_hand ? "true" : "false") << "\n"
+    << (eye_on_hand ? "robot_effector_frame: " : "robot_base_frame: ") << mount << "\ntracking_base_frame: " << camera
+    << "\ntransformation:\n  x: " << mount_from_camera.t.x() << "\n  y: " << mount_from_camera.t.y()
+    << "\n  z: " << mount_from_camera.t.z() << "\n  qx: " << q[0] << "\n  qy: " << q[1] << "\n  qz: " << q[2]
     << "\n  qw: " << q[3] << "\n";
   return y.str();
 }
 
-std::string static_transform_launch(const Pose& base_from_camera, const std::string& base, const std::string& camera) {
-  const auto q = base_from_camera.quaternion_xyzw();
+std::string static_transform_launch(const Pose& mount_from_camera, const std::string& mount, const std::string& camera) {
+  const auto q = mount_from_camera.quaternion_xyzw();
   std::ostringstream l;
   l.precision(9);
-  l << "<!-- diffdope_ros calibration: the calibrated camera (" << camera << ") in the robot base frame (" << base
-    << ").\n     If your camera driver already publishes a parent of " << camera
+  l << "<!-- diffdope_ros calibration: the calibrated camera (" << camera << ") in the robot's frame " << mount
+    << ".\n     If your camera driver already publishes a parent of " << camera
     << " (e.g. camera_link), publish the\n     transform to that parent instead (compose with the driver's "
     << "camera_link -> optical transform). -->\n<launch>\n  <node pkg=\"tf2_ros\" type=\"static_transform_publisher\" "
-    << "name=\"diffdope_camera_calibration\"\n        args=\"" << base_from_camera.t.x() << " " << base_from_camera.t.y()
-    << " " << base_from_camera.t.z() << " " << q[0] << " " << q[1] << " " << q[2] << " " << q[3] << " " << base << " "
-    << camera << "\"/>\n</launch>\n";
+    << "name=\"diffdope_camera_calibration\"\n        args=\"" << mount_from_camera.t.x() << " "
+    << mount_from_camera.t.y() << " " << mount_from_camera.t.z() << " " << q[0] << " " << q[1] << " " << q[2] << " "
+    << q[3] << " " << mount << " " << camera << "\"/>\n</launch>\n";
   return l.str();
 }
 

@@ -274,11 +274,34 @@ std::map<std::string, Pose> RobotModel::link_poses(const std::map<std::string, d
   return out;
 }
 
-std::vector<MeshPart> RobotModel::posed_visuals(const std::map<std::string, double>& positions) const {
+std::vector<MeshPart> RobotModel::posed_visuals(const std::map<std::string, double>& positions,
+                                                const std::set<std::string>& leave_out) const {
   const std::map<std::string, Pose> links = link_poses(positions);
   std::vector<MeshPart> parts;
-  for (const RobotVisual& v : visuals_) parts.push_back({v.mesh.get(), links.at(v.link) * v.link_from_visual, v.scale});
+  for (const RobotVisual& v : visuals_)
+    if (!leave_out.count(v.link)) parts.push_back({v.mesh.get(), links.at(v.link) * v.link_from_visual, v.scale});
   return parts;
+}
+
+bool RobotModel::has_link(const std::string& link) const {
+  if (link == root_) return true;
+  for (const Joint& j : joints_)
+    if (j.child == link) return true;
+  return false;
+}
+
+std::set<std::string> RobotModel::links_fixed_to(const std::string& link) const {
+  std::set<std::string> out{link};
+  for (bool grew = true; grew;) {  // joints_ is a tree walk: a few sweeps reach every fixed neighbour
+    grew = false;
+    for (const Joint& j : joints_)
+      if (j.type == Joint::Type::kFixed && out.count(j.parent) != out.count(j.child)) {
+        out.insert(j.parent);
+        out.insert(j.child);
+        grew = true;
+      }
+  }
+  return out;
 }
 
 }  // namespace diffdope

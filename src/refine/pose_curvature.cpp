@@ -24,16 +24,6 @@ Vector6d gradient_about(const Vector6d& g, const Eigen::Vector3d& pivot) {
   return out;
 }
 
-namespace {
-
-Eigen::Matrix3d skew(const Eigen::Vector3d& r) {
-  Eigen::Matrix3d S;
-  S << 0, -r.z(), r.y(), r.z(), 0, -r.x(), -r.y(), r.x(), 0;
-  return S;
-}
-
-}  // namespace
-
 Matrix6d surface_displacement_metric(const Mesh& mesh, const Eigen::Matrix3d& R, const Eigen::Vector3d& pivot_model) {
   // A surface point r (from the pivot) moves by v + w x r = J(r) δ, J = [I, -[r]x]: G = E[Jᵀ J], the area-weighted
   // mean over the triangles (each at its centroid, plus its own spread: exact second moments per triangle).
@@ -75,9 +65,19 @@ Matrix6d surface_displacement_metric(const Mesh& mesh, const Eigen::Matrix3d& R,
 PoseCurvature probe_pose_curvature(Renderer& renderer, const Camera& camera, const Mesh& mesh,
                                    const Observation& observed, const LossOptions& loss, const Pose& pose,
                                    double distance, const std::vector<Vector6d>& free_twists) {
+  return probe_pose_curvature(renderer, {{camera, mesh, observed}}, loss, pose, mesh.center(), distance, free_twists);
+}
+
+PoseCurvature probe_pose_curvature(Renderer& renderer, const std::vector<ProbeView>& views, const LossOptions& loss,
+                                   const Pose& pose, const Eigen::Vector3d& pivot_model, double distance,
+                                   const std::vector<Vector6d>& free_twists) {
   PoseCurvature out;
-  const Eigen::Vector3d pivot = pose * mesh.center();
-  out.metric = surface_displacement_metric(mesh, pose.R, mesh.center());
+  if (views.empty()) return out;
+  const double n_views = double(views.size());
+  const Eigen::Vector3d pivot = pose * pivot_model;
+  Matrix6d metric = Matrix6d::Zero();
+  for (const ProbeView& view : views) metric += surface_displacement_metric(view.mesh, pose.R, pivot_model);
+  out.metric = metric / n_views;
   const Eigen::LLT<Matrix6d> llt(out.metric);
   if (llt.info() != Eigen::Success || !(distance > 0)) return out;
   const Matrix6d L = llt.matrixL();
@@ -90,17 +90,23 @@ PoseCurvature probe_pose_curvature(Renderer& renderer, const Camera& camera, con
   for (int i = 0; i < 6; ++i)
     for (const double s : {h, -h}) probes.push_back(twist_about(pose, s * LinvT.col(i), pivot));
   probes.push_back(pose);
+  // The views' mean loss and gradient (about the pivot) at each probe.
+  std::vector<double> totals(probes.size(), 0.0);
+  std::vector<Vector6d> gradients(probes.size(), Vector6d::Zero());
   std::vector<LossValue> v;
-  renderer.evaluate(camera, mesh, observed, probes, loss, true, v);
-  out.loss = v[12].total;
-  for (const LossValue& x : v)
-    if (!std::isfinite(x.total)) return out;
-  Matrix6d Hq;
-  for (int i = 0; i < 6; ++i) {
-    const Vector6d gp = Linv * gradient_about(v[2 * i].gradient, pivot);
-    const Vector6d gm = Linv * gradient_about(v[2 * i + 1].gradient, pivot);
-    Hq.col(i) = (gp - gm) / (2 * h);
+  for (const ProbeView& view : views) {
+    renderer.evaluate(view.camera, view.mesh, view.observed, probes, loss, true, v);
+    for (size_t k = 0; k < probes.size(); ++k) {
+      totals[k] += v[k].total;
+      gradients[k] += gradient_about(v[k].gradient, pivot);
+    }
   }
+  for (size_t k = 0; k < probes.size(); ++k) totals[k] /= n_views, gradients[k] /= n_views;
+  out.loss = totals[12];
+  for (const double t : totals)
+    if (!std::isfinite(t)) return out;
+  Matrix6d Hq;
+  for (int i = 0; i < 6; ++i) Hq.col(i) = (Linv * gradients[size_t(2 * i)] - Linv * gradients[size_t(2 * i + 1)]) / (2 * h);
   Hq = 0.5 * (Hq + Hq.transpose()).eval();
   out.hessian = L * Hq * L.transpose();
 
@@ -124,8 +130,12 @@ PoseCurvature probe_pose_curvature(Renderer& renderer, const Camera& camera, con
 
   const std::vector<Pose> sides{twist_about(pose, distance * out.weakest_twist, pivot),
                                 twist_about(pose, -distance * out.weakest_twist, pivot)};
-  renderer.evaluate(camera, mesh, observed, sides, loss, false, v);
-  out.weakest_rise = std::min(v[0].total, v[1].total) - out.loss;
+  double plus = 0, minus = 0;
+  for (const ProbeView& view : views) {
+    renderer.evaluate(view.camera, view.mesh, view.observed, sides, loss, false, v);
+    plus += v[0].total, minus += v[1].total;
+  }
+  out.weakest_rise = std::min(plus / n_views, minus / n_views) - out.loss;
   out.valid = std::isfinite(out.weakest_rise);
   return out;
 }

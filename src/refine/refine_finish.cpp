@@ -247,9 +247,16 @@ void RefineRun::judge_result(Renderer& renderer, RefineResult& res, int rendered
   const RefinerOptions& o = options_;
   const bool one_view = meshes_.size() == 1;
   const Mesh& mesh0 = *meshes_.front();
-  if (one_view && o.probe_distance > 0 && std::isfinite(res.loss.total))
-    res.curvature = probe_pose_curvature(renderer, fine_[0].cam, mesh0, fine_[0].obs, loss_, res.pose,
-                                         o.probe_distance, mesh0.symmetry.free_twists(res.pose, res.pose * mesh0.center()));
+  if (o.probe_distance > 0 && std::isfinite(res.loss.total)) {
+    if (one_view) {
+      res.curvature = probe_pose_curvature(renderer, fine_[0].cam, mesh0, fine_[0].obs, loss_, res.pose,
+                                           o.probe_distance, mesh0.symmetry.free_twists(res.pose, res.pose * mesh0.center()));
+    } else {  // views of one pose (a calibration's captures): their mean loss, about the common pivot
+      std::vector<ProbeView> views;
+      for (size_t v = 0; v < meshes_.size(); ++v) views.push_back({fine_[v].cam, *meshes_[v], fine_[v].obs});
+      res.curvature = probe_pose_curvature(renderer, views, loss_, res.pose, pivot_model_, o.probe_distance);
+    }
+  }
   res.pivot = res.pose * pivot_model_;
   res.covariance = pose_covariance(res.curvature, rendered_pixels, diameter_);
   const size_t n = res.history.size(), tail = std::max<size_t>(2, n / 10);

@@ -1,6 +1,7 @@
 // The generated test arm (procedural_robot.hpp).
 #include "diffdope/procedural_robot.hpp"
 
+#include <algorithm>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
@@ -81,6 +82,46 @@ std::map<std::string, double> random_configuration(const GeneratedRobot& robot, 
   // Shoulder and elbow bent forward by at most ~70 degrees: the arm stays up, its links apart.
   q.at("joint2") = 0.6 * U(rng);
   q.at("joint3") = 0.4 + 0.6 * U(rng);
+  return q;
+}
+
+SyntheticScene synthesize_robot_scene(Renderer& renderer, const Camera& camera, const Mesh& posed_arm,
+                                      const Pose& camera_from_base, const RobotSceneOptions& options, uint32_t seed) {
+  static const Mesh table = make_box(Eigen::Vector3d(1.4, 1.2, 0.04), make_label_texture(256, 21));
+  static const Mesh box = make_box(Eigen::Vector3d(0.12, 0.10, 0.16), make_label_texture(64, 22));
+  static const Mesh can = make_cylinder(0.04, 0.12, 32, make_label_texture(64, 23));
+  static const Mesh occluder = make_box(Eigen::Vector3d(0.06, 0.06, 0.06), make_label_texture(64, 5));
+  const auto at = [&](double x, double y, double z) {
+    return camera_from_base * Pose(Eigen::Matrix3d::Identity(), Eigen::Vector3d(x, y, z));
+  };
+  std::vector<SceneObject> objects{{&posed_arm, camera_from_base}};
+  if (options.table) {
+    objects.push_back({&table, at(0.25, -0.1, -0.02)});
+    objects.push_back({&box, at(0.12, -0.30, 0.08)});
+    objects.push_back({&can, at(-0.05, 0.30, 0.06)});
+  }
+  if (options.occluder)  // over part of the upper arm, a fifth of the way from it to the camera
+    objects.push_back({&occluder, Pose(Eigen::Matrix3d::Identity(),
+                                       0.8 * (camera_from_base * generated_view().centre) + Eigen::Vector3d(0.04, 0, 0))});
+  return synthesize_scene(renderer, camera, objects, options.noise, seed);
+}
+
+std::map<std::string, double> hand_reference_configuration() {
+  return {{"joint1", 0.0}, {"joint2", 0.3}, {"joint3", 1.35}, {"joint4", 0.0}, {"joint5", 0.0}};
+}
+
+Pose generated_hand_camera(const Pose& base_from_hand) {
+  const Eigen::Vector3d eye = base_from_hand.t + Eigen::Vector3d(0, 0, -0.08);
+  return look_at(eye, Eigen::Vector3d(0, 0, 0.15)) * base_from_hand;
+}
+
+std::map<std::string, double> random_hand_configuration(const GeneratedRobot& robot, std::mt19937_64& rng) {
+  std::uniform_real_distribution<double> U(-1.0, 1.0);
+  std::map<std::string, double> q = hand_reference_configuration();
+  for (auto& [joint, value] : q) {
+    const auto [lo, hi] = robot.limits.at(joint);
+    value = std::clamp(value + (joint == "joint1" ? 0.5 : 0.25) * U(rng), lo, hi);
+  }
   return q;
 }
 

@@ -2,6 +2,7 @@
 // of it at known joint positions (include/diffdope/calibration.hpp), everything read from files.
 //   diffdope_calibrate --urdf FILE --captures DIR --camera FILE --init FILE --out DIR [options]
 //   diffdope_calibrate --generate DIR [--count N] [--seed S] [--init-error CM DEG] [--no-mask] [--no-rgb]
+//                      [--no-table] [--eye-in-hand link5]
 // Writes DIR/calibration.yaml (easy_handeye's layout), DIR/calibration.launch (a static_transform_publisher),
 // DIR/result.json, DIR/residuals.txt and DIR/overlay_<capture>.png. Every unusable input is one line
 // `diffdope_calibrate: <file>: <problem>` with exit code 1; command-line mistakes print the usage, exit code 2.
@@ -29,6 +30,7 @@
 #include "diffdope/procedural.hpp"
 #include "diffdope/procedural_robot.hpp"
 #include "diffdope/synthetic.hpp"
+#include "calibration_generate.hpp"
 #include "tool_io.hpp"
 
 using namespace diffdope;
@@ -44,6 +46,7 @@ const char* kUsage =
     "                          [--mask-margin M] [--robot-base-frame NAME] [--camera-frame NAME] [--truth FILE]\n"
     "                          [--quiet]\n"
     "       diffdope_calibrate --generate DIR [--count N] [--seed S] [--init-error CM DEG] [--no-mask] [--no-rgb]\n"
+    "                                                 [--no-table] [--eye-in-hand link5]\n"
     "\n"
     "  --urdf FILE            the robot (meshes: STL, DAE, OBJ, PLY...; package:// paths, see --package-path)\n"
     "  --captures DIR         one folder per capture (in name order), each with depth.png (16-bit, millimetres;\n"
@@ -52,84 +55,28 @@ const char* kUsage =
     "                         mask.png (nonzero = robot; all captures or none)\n"
     "  --camera FILE          intrinsics (.json / .yaml, as diffdope_refine), the depth images' size\n"
     "  --init FILE            initial guess of the camera's pose in the robot base frame (base -> camera optical\n"
-    "                         frame, metres), JSON: {\"R\": [9], \"t\": [3]}, {\"quaternion\": [x,y,z,w], \"t\": [3]}\n"
-    "                         or {\"matrix\": [16]}; 5 cm / 10 deg off is fine, see docs/calibration.md for more\n"
+    "                         frame, metres; eye in hand: in LINK's frame), JSON: {\"R\": [9], \"t\": [3]},\n"
+    "                         {\"quaternion\": [x,y,z,w], \"t\": [3]} or {\"matrix\": [16]}; 5 cm / 10 deg off is\n"
+    "                         fine, see docs/calibration.md for more\n"
     "  --out DIR              output folder (created)\n"
     "  --package-path N=DIR   resolve package://N/... to DIR/... (repeatable; else ROS_PACKAGE_PATH is searched)\n"
     "  --depth-scale M        metres per depth unit (default 0.001)\n"
     "  --config FILE          refiner options YAML over the calibration's defaults (see config/default.yaml)\n"
     "  --passes N             descents in a row (default 2)\n"
     "  --mask-margin M        without masks: metres around the robot at the guess that count as robot (0.08)\n"
+    "  --eye-in-hand LINK     the camera rides on LINK (e.g. the end effector): calibrates LINK -> camera; the\n"
+    "                         links fixed to LINK are left out (default: eye to hand, a static camera)\n"
     "  --robot-base-frame F   frame name for the outputs (default: the URDF's root link)\n"
     "  --camera-frame F       frame name for the outputs (default camera_color_optical_frame)\n"
     "  --truth FILE           the true camera pose (same format as --init): prints and stores the errors\n"
     "  --quiet                no progress on the terminal\n"
     "  --generate DIR         writes a generated arm, N captures of it (default 3), camera.json, init.json (the\n"
-    "                         truth moved by --init-error, default 5 cm 10 deg) and truth.json, then exits\n";
+    "                         truth moved by --init-error, default 5 cm 10 deg) and truth.json, then exits;\n"
+    "                         the arm stands on a table with a box and a can beside it (--no-table: alone)\n";
 
 int usage_error(const std::string& what) {
   std::cerr << "diffdope_calibrate: " << what << "\n" << kUsage;
   return 2;
-}
-
-json pose_json(const Pose& p) {
-  const auto q = p.quaternion_xyzw();
-  return json{{"t", {p.t.x(), p.t.y(), p.t.z()}}, {"quaternion", {q[0], q[1], q[2], q[3]}}};
-}
-
-void write_text(const std::string& path, const std::string& text) {
-  std::ofstream f(path);
-  f << text;
-  if (!f) fail(path, "cannot write");
-}
-
-// ---- Generating a capture set ----
-
-int generate(const std::string& dir, int count, uint64_t seed, double init_cm, double init_deg, bool masks, bool rgb) {
-  fs::create_directories(fs::path(dir) / "captures");
-  const GeneratedRobot robot = write_generated_robot((fs::path(dir) / "robot").string());
-  const RobotModel model = RobotModel::load_urdf(robot.urdf_path);
-  const GeneratedView view = generated_view();
-  const Camera& cam = view.camera;
-  const Pose& truth = view.camera_from_base;
-  std::mt19937_64 rng(seed);
-  const auto renderer = make_cpu_renderer();
-  const Mesh occluder = make_box(Eigen::Vector3d(0.06, 0.06, 0.06), make_label_texture(64, 5));
-  for (int k = 0; k < count; ++k) {
-    const auto q = random_configuration(robot, rng);
-    const Mesh posed = merge_meshes(model.posed_visuals(q), "arm");
-    std::vector<SceneObject> objects{{&posed, truth}};
-    if (k % 3 == 1)  // every third capture has a box floating in front of the upper arm
-      objects.push_back({&occluder, Pose(Eigen::Matrix3d::Identity(),
-                                         0.8 * (truth * view.centre) + Eigen::Vector3d(0.04, 0, 0))});
-    SyntheticNoise noise;
-    noise.background_depth = 2.5;
-    const SyntheticScene s = synthesize_scene(*renderer, cam, objects, noise, uint32_t(seed * 1000 + k));
-    char name[16];
-    std::snprintf(name, sizeof name, "%02d", k);
-    const fs::path cdir = fs::path(dir) / "captures" / name;
-    fs::create_directories(cdir);
-    cv::Mat depth_mm;
-    s.depth.convertTo(depth_mm, CV_16U, 1000.0);
-    write_image((cdir / "depth.png").string(), depth_mm);
-    if (rgb) write_image((cdir / "rgb.png").string(), to_bgr8(s.rgb));
-    if (masks) {
-      cv::Mat m = s.visible_masks[0] >= 0.5f;
-      write_image((cdir / "mask.png").string(), m);
-    }
-    json joints;
-    for (const auto& [n, v] : q) joints[n] = v;
-    write_text((cdir / "joints.json").string(), joints.dump(2) + "\n");
-  }
-  write_text((fs::path(dir) / "camera.json").string(),
-             json{{"fx", cam.fx}, {"fy", cam.fy}, {"cx", cam.cx}, {"cy", cam.cy}, {"width", cam.width},
-                  {"height", cam.height}}.dump(2) + "\n");
-  const Pose guess = perturb_pose(truth, view.centre, init_deg * M_PI / 180, 0.01 * init_cm, rng);
-  write_text((fs::path(dir) / "init.json").string(), pose_json(guess.inverse()).dump(2) + "\n");
-  write_text((fs::path(dir) / "truth.json").string(), pose_json(truth.inverse()).dump(2) + "\n");
-  std::printf("wrote %s: robot/robot.urdf, %d captures, camera.json, init.json (%.1f cm, %.1f deg off), truth.json\n",
-              dir.c_str(), count, init_cm, init_deg);
-  return 0;
 }
 
 // ---- Reading captures ----
@@ -168,6 +115,7 @@ std::map<std::string, double> read_joints(const std::string& path) {
 
 struct Args {
   std::string urdf, captures, camera, init, out, config, truth, base_frame, camera_frame = "camera_color_optical_frame";
+  std::string hand_link;  // eye in hand: the link the camera rides on
   std::map<std::string, std::string> packages;
   double depth_scale = 0.001, mask_margin = -1;
   int passes = 0;
@@ -251,11 +199,14 @@ int run(const Args& a) {
     QuietStderr quiet;  // urdfdom and assimp print their own complaints
     return RobotModel::load_urdf(a.urdf, resolve);
   });
+  if (!a.hand_link.empty() && !robot.has_link(a.hand_link))
+    fail(a.urdf, "no link '" + a.hand_link + "' (--eye-in-hand: the link the camera rides on)");
   std::vector<CalibrationCapture> captures = read_captures(a);
   for (const CalibrationCapture& c : captures)  // every joint the robot needs, named in the capture's file
     about((fs::path(a.captures) / c.name / "joints.json").string(), [&] { robot.link_poses(c.joint_positions); });
-  const Pose base_from_camera0 = read_pose_file(a.init);
-  const Pose initial = base_from_camera0.inverse();  // camera <- base
+  const CameraMount mount{a.hand_link};
+  const Pose base_from_camera0 = read_pose_file(a.init);  // (mount <- camera: the base, or the hand's link)
+  const Pose initial = base_from_camera0.inverse();
 
   std::error_code ec;
   fs::create_directories(a.out, ec);
@@ -269,19 +220,19 @@ int run(const Args& a) {
     };
   CalibrationResult r;
   try {
-    r = calibrator.calibrate(robot, captures, initial);
+    r = calibrator.calibrate(robot, captures, initial, mount);
   } catch (const std::invalid_argument& e) {
     if (progress) std::fprintf(stderr, "\n");
     fail(a.captures, one_line(e.what()));
   }
   if (progress) std::fprintf(stderr, "\n");
-  const Pose base_from_camera = r.camera_from_base.inverse();
-  const std::string base = a.base_frame.empty() ? robot.root_link() : a.base_frame;
+  const Pose base_from_camera = r.camera_from_mount.inverse();
+  const std::string base = mount.eye_in_hand() ? mount.link : a.base_frame.empty() ? robot.root_link() : a.base_frame;
 
   // Overlays: the robot at the guess (red) and calibrated (green) over each capture.
   const auto renderer = make_cpu_renderer();
   for (const CalibrationCapture& c : captures) {
-    const Mesh posed = merge_meshes(robot.posed_visuals(c.joint_positions), c.name);
+    const Mesh posed = merge_meshes(mount.posed_robot(robot, c.joint_positions), c.name);
     cv::Mat bgr;
     if (c.observed.has_rgb()) {
       bgr = to_bgr8(c.observed.rgb);
@@ -290,7 +241,7 @@ int run(const Args& a) {
       c.observed.depth.convertTo(d, CV_8U, 255.0 / 3.0);
       cv::cvtColor(d, bgr, cv::COLOR_GRAY2BGR);
     }
-    const auto imgs = renderer->render(c.camera, posed, {initial, r.camera_from_base});
+    const auto imgs = renderer->render(c.camera, posed, {initial, r.camera_from_mount});
     draw_render(bgr, imgs[0], cv::Scalar(0, 0, 255), 1);
     draw_render(bgr, imgs[1], cv::Scalar(0, 255, 0), 2);
     put_label(bgr, "guess", cv::Point(8, 24), cv::Scalar(0, 0, 255), 0.6);
@@ -308,12 +259,14 @@ int run(const Args& a) {
   }
   const double moved_mm = 1e3 * (base_from_camera.t - base_from_camera0.t).norm();
   const double moved_deg = Eigen::AngleAxisd(base_from_camera.R * base_from_camera0.R.transpose()).angle() * 180 / M_PI;
-  json result{{"base_from_camera", pose_json(base_from_camera)},
-              {"camera_from_base", pose_json(r.camera_from_base)},
-              {"initial_base_from_camera", pose_json(base_from_camera0)},
+  json result{{"base_from_camera", pose_file_json(base_from_camera)},
+              {"camera_from_base", pose_file_json(r.camera_from_mount)},
+              {"initial_base_from_camera", pose_file_json(base_from_camera0)},
               {"moved_from_guess", {{"mm", moved_mm}, {"deg", moved_deg}}},
               {"plausible", r.plausible},
               {"confidence", r.confidence},
+              {"position_std_mm", r.position_std < 0 ? -1.0 : 1e3 * r.position_std},
+              {"rotation_std_deg", r.rotation_std < 0 ? -1.0 : r.rotation_std * 180 / M_PI},
               {"passes", r.passes},
               {"time_s", r.time_ms / 1e3},
               {"robot_base_frame", base},
@@ -332,19 +285,23 @@ int run(const Args& a) {
     truth_line = "error against " + a.truth + ": camera position " + fmt(mm, "%.2f") + " mm, rotation " +
                  fmt(deg, "%.3f") + " deg\n";
   }
-  write_text((fs::path(a.out) / "calibration.yaml").string(), easy_handeye_yaml(base_from_camera, base, a.camera_frame));
+  write_text((fs::path(a.out) / "calibration.yaml").string(), easy_handeye_yaml(base_from_camera, base, a.camera_frame,
+                                                                                       mount.eye_in_hand()));
   write_text((fs::path(a.out) / "calibration.launch").string(), static_transform_launch(base_from_camera, base, a.camera_frame));
   write_text((fs::path(a.out) / "residuals.txt").string(), table.str());
   write_text((fs::path(a.out) / "result.json").string(), result.dump(2) + "\n");
   if (!a.quiet) {
+    const std::string firmness = r.position_std < 0 ? std::string("(not probed)")
+                                                    : fmt(1e3 * r.position_std, "%.2f") + " mm / " +
+                                                          fmt(r.rotation_std * 180 / M_PI, "%.3f") + " deg (1 sigma)";
     std::printf("%s", table.str().c_str());
     std::printf("camera in %s: t = [%.4f %.4f %.4f] m, quaternion [%.5f %.5f %.5f %.5f] (moved %.1f mm, %.2f deg "
-                "from the guess)\n%s, confidence %.2f; %d capture(s), %.1f s\n%s",
+                "from the guess)\n%s, confidence %.2f; pinned down to %s; %d capture(s), %.1f s\n%s",
                 base.c_str(), base_from_camera.t.x(), base_from_camera.t.y(), base_from_camera.t.z(),
                 base_from_camera.quaternion_xyzw()[0], base_from_camera.quaternion_xyzw()[1],
                 base_from_camera.quaternion_xyzw()[2], base_from_camera.quaternion_xyzw()[3], moved_mm, moved_deg,
                 r.plausible ? "plausible" : "NOT plausible (check the overlays and the residuals)", r.confidence,
-                int(captures.size()), r.time_ms / 1e3, truth_line.c_str());
+                firmness.c_str(), int(captures.size()), r.time_ms / 1e3, truth_line.c_str());
   }
   return 0;
 }
@@ -354,11 +311,7 @@ int run(const Args& a) {
 int main(int argc, char** argv) {
   cv::utils::logging::setLogLevel(cv::utils::logging::LOG_LEVEL_SILENT);
   Args a;
-  std::string generate_dir;
-  int count = 3;
-  uint64_t seed = 1;
-  double init_cm = 5, init_deg = 10;
-  bool masks = true, rgb = true;
+  GenerateOptions gen;
   try {
     for (int i = 1; i < argc; ++i) {
       const std::string k = argv[i];
@@ -367,8 +320,9 @@ int main(int argc, char** argv) {
         return 0;
       }
       if (k == "--quiet") { a.quiet = true; continue; }
-      if (k == "--no-mask") { masks = false; continue; }
-      if (k == "--no-rgb") { rgb = false; continue; }
+      if (k == "--no-mask") { gen.masks = false; continue; }
+      if (k == "--no-rgb") { gen.rgb = false; continue; }
+      if (k == "--no-table") { gen.table = false; continue; }
       if (i + 1 >= argc) return usage_error(k + ": missing value");
       const std::string v = argv[++i];
       if (k == "--urdf") a.urdf = v;
@@ -379,6 +333,7 @@ int main(int argc, char** argv) {
       else if (k == "--config") a.config = v;
       else if (k == "--truth") a.truth = v;
       else if (k == "--robot-base-frame") a.base_frame = v;
+      else if (k == "--eye-in-hand") a.hand_link = v;
       else if (k == "--camera-frame") a.camera_frame = v;
       else if (k == "--depth-scale") a.depth_scale = parse_number_arg(k, v);
       else if (k == "--mask-margin") a.mask_margin = parse_number_arg(k, v);
@@ -388,14 +343,14 @@ int main(int argc, char** argv) {
         if (eq == std::string::npos || eq == 0 || eq + 1 == v.size())
           return usage_error("--package-path: expected NAME=DIR, got '" + v + "'");
         a.packages[v.substr(0, eq)] = v.substr(eq + 1);
-      } else if (k == "--generate") generate_dir = v;
-      else if (k == "--count") count = int(parse_integer_arg(k, v, 1, 100));
-      else if (k == "--seed") seed = uint64_t(parse_integer_arg(k, v, 0, 1LL << 62));
+      } else if (k == "--generate") gen.dir = v;
+      else if (k == "--count") gen.count = int(parse_integer_arg(k, v, 1, 100));
+      else if (k == "--seed") gen.seed = uint64_t(parse_integer_arg(k, v, 0, 1LL << 62));
       else if (k == "--init-error") {
         if (i + 1 >= argc) return usage_error("--init-error: expected CM DEG");
-        init_cm = parse_number_arg(k, v);
-        init_deg = parse_number_arg(k, argv[++i]);
-        if (init_cm < 0 || init_deg < 0 || init_cm > 100 || init_deg > 90)
+        gen.init_cm = parse_number_arg(k, v);
+        gen.init_deg = parse_number_arg(k, argv[++i]);
+        if (gen.init_cm < 0 || gen.init_deg < 0 || gen.init_cm > 100 || gen.init_deg > 90)
           return usage_error("--init-error: CM in [0, 100], DEG in [0, 90]");
       } else return usage_error("unknown option '" + k + "'");
     }
@@ -404,7 +359,13 @@ int main(int argc, char** argv) {
     return usage_error(e.what());
   }
   try {
-    if (!generate_dir.empty()) return generate(generate_dir, count, seed, init_cm, init_deg, masks, rgb);
+    if (!gen.dir.empty()) {
+      if (!a.hand_link.empty() && a.hand_link != kGeneratedHandLink)
+        return usage_error(std::string("--generate --eye-in-hand: the generated arm's camera rides on ") +
+                           kGeneratedHandLink);
+      gen.eye_in_hand = !a.hand_link.empty();
+      return generate_calibration_set(gen);
+    }
     for (const auto& [flag, value] : {std::pair<const char*, std::string>{"--urdf", a.urdf}, {"--captures", a.captures},
                                       {"--camera", a.camera}, {"--init", a.init}, {"--out", a.out}})
       if (value.empty()) return usage_error(std::string(flag) + " is required");

@@ -10,6 +10,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <fstream>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 #include <vector>
@@ -101,6 +102,17 @@ void draw_render(cv::Mat& bgr8, const RenderImage& img, const cv::Scalar& colour
 void put_label(cv::Mat& img, const std::string& text, cv::Point at, const cv::Scalar& colour, double scale) {
   cv::putText(img, text, at, cv::FONT_HERSHEY_SIMPLEX, scale, cv::Scalar(0, 0, 0), 3, cv::LINE_AA);
   cv::putText(img, text, at, cv::FONT_HERSHEY_SIMPLEX, scale, colour, 1, cv::LINE_AA);
+}
+
+void write_text(const std::string& path, const std::string& text) {
+  std::ofstream f(path);
+  f << text;
+  if (!f) fail(path, "cannot write");
+}
+
+nlohmann::ordered_json pose_file_json(const Pose& p) {
+  const auto q = p.quaternion_xyzw();
+  return {{"t", {p.t.x(), p.t.y(), p.t.z()}}, {"quaternion", {q[0], q[1], q[2], q[3]}}};
 }
 
 }  // namespace diffdope::tools

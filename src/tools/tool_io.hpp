@@ -1,6 +1,7 @@
 #pragma once
 // What the command-line tools share: one-line errors naming the file, quiet image decoding, image writing and
 // the render overlays (diffdope_refine, diffdope_calibrate).
+#include <nlohmann/json.hpp>
 #include <opencv2/core.hpp>
 
 #include <string>
@@ -51,6 +52,10 @@ std::string fmt(double v, const char* f = "%.6f");
 std::string size_str(int w, int h);
 
 void write_image(const std::string& path, const cv::Mat& img);
+/// Writes `text` to `path`; fail() when it cannot.
+void write_text(const std::string& path, const std::string& text);
+/// A pose as read_pose_file() reads it: {"t": [3], "quaternion": [x, y, z, w]}.
+nlohmann::ordered_json pose_file_json(const Pose& p);
 cv::Mat to_bgr8(const cv::Mat& rgb_float);
 /// Translucent render (colour where coverage > 0.5, alpha 0.35) and its outline in `colour`.
 void draw_render(cv::Mat& bgr8, const RenderImage& img, const cv::Scalar& colour, int thickness);

@@ -1,7 +1,8 @@
-// rostest (calibration.test): the calibration node on a bag of the generated arm holding still in four
-// configurations and moving between them. Samples are refused while it moves or has not moved; four samples
-// from a guess 5 cm / 10 degrees off calibrate the camera within 2 mm / 0.2 degrees; the static TF and the saved
-// YAML carry the result; samples can be removed.
+// rostest (calibration.test, calibration_eye_in_hand.test): the calibration node on a bag of the generated arm
+// holding still in four configurations and moving between them, watched by a camera on a stand or on its hand.
+// Samples are refused while it moves or has not moved; four samples from a guess 5 cm / 10 degrees off
+// calibrate the camera within 2 mm / 0.2 degrees; the static TF and the saved YAML carry the result; samples
+// can be removed. ~mount_frame: the frame the result is in (base_link; link5 eye in hand).
 #include <gtest/gtest.h>
 #include <ros/ros.h>
 #include <std_srvs/Trigger.h>
@@ -28,6 +29,8 @@ double angle_deg(const diffdope::Pose& a, const diffdope::Pose& b) {
 
 TEST(CalibrationNode, SamplesComputeTfAndSave) {
   ros::NodeHandle nh;
+  const std::string mount = ros::NodeHandle("~").param<std::string>("mount_frame", "base_link");
+  const bool eye_in_hand = mount != "base_link";
   ASSERT_TRUE(ros::service::waitForService(kNode + "take_sample", ros::Duration(30)));
   std::vector<double> truth;
   ASSERT_TRUE(nh.getParam("/truth", truth));
@@ -65,19 +68,20 @@ TEST(CalibrationNode, SamplesComputeTfAndSave) {
   std::printf("calibration node: %s; error %.2f mm, %.3f deg\n", c.response.message.c_str(), mm, deg);
   EXPECT_LT(mm, 2.0);
   EXPECT_LT(deg, 0.2);
-  EXPECT_EQ(c.response.transform.header.frame_id, "base_link");
+  EXPECT_EQ(c.response.transform.header.frame_id, mount);
+  EXPECT_GT(c.response.position_std, 0);
   EXPECT_EQ(c.response.transform.child_frame_id, "camera_color_optical_frame");
 
   // The static TF carries it, published to the optical frame's parent (camera_link, the "driver's").
-  EXPECT_NE(c.response.message.find("published on TF as base_link -> camera_link"), std::string::npos)
+  EXPECT_NE(c.response.message.find("published on TF as " + mount + " -> camera_link"), std::string::npos)
       << c.response.message;
   tf2_ros::Buffer tf;
   tf2_ros::TransformListener listener(tf);
   // (Polled in wall time: the bag has ended, so simulated time no longer moves.)
-  for (int i = 0; i < 50 && !tf.canTransform("base_link", "camera_color_optical_frame", ros::Time(0)); ++i)
+  for (int i = 0; i < 50 && !tf.canTransform(mount, "camera_color_optical_frame", ros::Time(0)); ++i)
     ros::WallDuration(0.1).sleep();
   geometry_msgs::TransformStamped t;
-  ASSERT_NO_THROW(t = tf.lookupTransform("base_link", "camera_color_optical_frame", ros::Time(0)));
+  ASSERT_NO_THROW(t = tf.lookupTransform(mount, "camera_color_optical_frame", ros::Time(0)));
   const diffdope::Pose on_tf = diffdope_ros::pose_from_transform(t.transform, "tf");
   EXPECT_LT((on_tf.t - got.t).norm(), 1e-6);
 
@@ -90,7 +94,9 @@ TEST(CalibrationNode, SamplesComputeTfAndSave) {
   std::ifstream in(file);
   std::stringstream yaml;
   yaml << in.rdbuf();
-  EXPECT_NE(yaml.str().find("eye_on_hand: false"), std::string::npos) << yaml.str();
+  EXPECT_NE(yaml.str().find(eye_in_hand ? "eye_on_hand: true" : "eye_on_hand: false"), std::string::npos) << yaml.str();
+  EXPECT_NE(yaml.str().find((eye_in_hand ? "robot_effector_frame: " : "robot_base_frame: ") + mount), std::string::npos)
+      << yaml.str();
   EXPECT_NE(yaml.str().find("tracking_base_frame: camera_color_optical_frame"), std::string::npos) << yaml.str();
 
   diffdope_ros::RemoveSample remove;
@@ -111,7 +117,7 @@ int main(int argc, char** argv) {
   ros::AsyncSpinner spinner(1);
   spinner.start();
   // As a camera driver does: camera_link -> optical frame (REP 103: the optical z is camera_link's x). The node
-  // must then publish the calibration as base_link -> camera_link. (Debian's tf2_ros has no
+  // must then publish the calibration as base_link (or the hand's link) -> camera_link. (Debian's tf2_ros has no
   // static_transform_publisher executable, so the test publishes it.)
   tf2_ros::StaticTransformBroadcaster driver;
   geometry_msgs::TransformStamped t;

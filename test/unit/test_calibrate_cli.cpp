@@ -89,6 +89,30 @@ TEST_F(CalibrateCli, CalibratesTheGeneratedArm) {
   EXPECT_NE(slurp(dir / "out/calibration.launch").find("static_transform_publisher"), std::string::npos);
 }
 
+TEST_F(CalibrateCli, EyeInHandFromFiveCentimetresAndTenDegrees) {
+  // The camera on the hand's bracket: four captures with masks, the guess 5 cm / 10 degrees off (the target:
+  // within 1 mm / 0.05 degrees), easy_handeye's eye-on-hand layout.
+  const fs::path set = dir / "hand";
+  ASSERT_EQ(run("--generate " + set.string() + " --seed 3 --count 4 --no-rgb --eye-in-hand link5").rc, 0);
+  const std::string files = "--urdf " + (set / "robot/robot.urdf").string() + " --captures " +
+                            (set / "captures").string() + " --camera " + (set / "camera.json").string() +
+                            " --init " + (set / "init.json").string() + " --out " + (dir / "hand_out").string() +
+                            " --quiet --truth " + (set / "truth.json").string();
+  const CliRun r = run(files + " --eye-in-hand link5");
+  ASSERT_EQ(r.rc, 0) << r.err;
+  const nlohmann::json j = nlohmann::json::parse(slurp(dir / "hand_out/result.json"));
+  EXPECT_LT(j["error_vs_truth"]["camera_position_mm"].get<double>(), 1.0) << j.dump(2);
+  EXPECT_LT(j["error_vs_truth"]["rotation_deg"].get<double>(), 0.05) << j.dump(2);
+  EXPECT_TRUE(j["plausible"].get<bool>());
+  EXPECT_GT(j["position_std_mm"].get<double>(), 0);
+  const std::string yaml = slurp(dir / "hand_out/calibration.yaml");
+  for (const char* key : {"eye_on_hand: true", "robot_effector_frame: link5", "tracking_base_frame: "})
+    EXPECT_NE(yaml.find(key), std::string::npos) << key << "\n" << yaml;
+  EXPECT_NE(slurp(dir / "hand_out/calibration.launch").find(" link5 camera_color_optical_frame"), std::string::npos);
+  // A link the robot does not have names the URDF.
+  expect_error(run(files + " --eye-in-hand gripper"), (set / "robot/robot.urdf").string(), "no link 'gripper'");
+}
+
 TEST_F(CalibrateCli, CaptureErrorsNameTheFile) {
   {  // a capture without its joints
     const fs::path c = copy_captures("no_joints");

@@ -125,3 +125,37 @@ TEST(PoseCovariance, AtTheOriginARotationAboutThePivotMovesTheOrigin) {
   EXPECT_NEAR(at(5, 5), 0.01, 1e-12);
   EXPECT_NEAR(at(1, 5), 0.01 * 0.1, 1e-12);
 }
+
+TEST(PoseCurvature, ViewsOfOnePoseWeighTheirMeanLoss) {
+  // Two views of one pose: the same view twice probes as that view alone; a second, different view (the block
+  // seen with a box beside it, as a robot's links differ between captures) adds what it sees: the mean loss's
+  // Hessian is close to the mean of the views' Hessians about the common pivot (each probed along its own
+  // metric's axes: a secant Hessian, not exact).
+  const Camera cam{420, 420, 159.5, 119.5, 320, 240};
+  const Mesh block = make_l_block(0.12, make_label_texture(128, 3));
+  const Mesh cube = make_box(Eigen::Vector3d(0.04, 0.04, 0.04), make_label_texture(32, 4));
+  const Mesh other = merge_meshes({{&block, Pose()}, {&cube, Pose(Eigen::Matrix3d::Identity(), Eigen::Vector3d(0.1, 0, 0))}}, "other");
+  Vector6d d;
+  d << 0, 0, 0, 0.5, -0.3, 0.2;
+  const Pose pose(se3_exp(d).R, Eigen::Vector3d(0.0, 0.01, 0.6));
+  auto renderer = make_cpu_renderer();
+  const Observation a = synthesize_observation(*renderer, cam, block, pose, SyntheticNoise(), 1);
+  const Observation b = synthesize_observation(*renderer, cam, other, pose, SyntheticNoise(), 2);
+  const Eigen::Vector3d pivot = block.center();
+  const PoseCurvature one = probe_pose_curvature(*renderer, {{cam, block, a}}, LossOptions(), pose, pivot, 0.01);
+  const PoseCurvature twice =
+      probe_pose_curvature(*renderer, {{cam, block, a}, {cam, block, a}}, LossOptions(), pose, pivot, 0.01);
+  ASSERT_TRUE(one.valid);
+  ASSERT_TRUE(twice.valid);
+  EXPECT_NEAR(twice.loss, one.loss, 1e-12);
+  EXPECT_LT((twice.hessian - one.hessian).norm(), 1e-9 * one.hessian.norm());
+  // The single-view call is the one-view case of the several-view probe.
+  const PoseCurvature single = probe_pose_curvature(*renderer, cam, block, a, LossOptions(), pose, 0.01);
+  EXPECT_EQ(single.hessian, one.hessian);
+  const PoseCurvature only_b = probe_pose_curvature(*renderer, {{cam, other, b}}, LossOptions(), pose, pivot, 0.01);
+  const PoseCurvature both =
+      probe_pose_curvature(*renderer, {{cam, block, a}, {cam, other, b}}, LossOptions(), pose, pivot, 0.01);
+  ASSERT_TRUE(both.valid);
+  EXPECT_NEAR(both.loss, 0.5 * (one.loss + only_b.loss), 1e-9);
+  EXPECT_LT((both.hessian - 0.5 * (one.hessian + only_b.hessian)).norm(), 0.1 * both.hessian.norm());
+}

@@ -40,6 +40,10 @@ void CalibrationNodelet::onInit() {
   stillness_.max_gap = pnh.param("max_joint_gap", stillness_.max_gap);
   options_.passes = pnh.param("passes", options_.passes);
   options_.mask_margin = pnh.param("mask_margin", options_.mask_margin);
+  options_.refined_mask_margin = pnh.param("refined_mask_margin", options_.refined_mask_margin);
+  options_.max_position_std = pnh.param("max_position_std", options_.max_position_std);
+  const std::string mode = pnh.param<std::string>("mode", "eye_to_hand");
+  const std::string end_effector = pnh.param<std::string>("end_effector_frame", "");
   const char* ros_home = std::getenv("ROS_HOME");
   const char* home = std::getenv("HOME");
   output_file_ = pnh.param<std::string>(
@@ -53,8 +57,15 @@ void CalibrationNodelet::onInit() {
     const diffdope::OptionRange check{"parameters"};
     check.above("~max_interval", max_interval_, 0, 10, " s");
     check("~min_configuration_change", min_configuration_change_, 0, 10, " rad");
+    if (mode == "eye_in_hand") {
+      if (end_effector.empty()) check.fail("~mode eye_in_hand needs ~end_effector_frame (the link the camera rides on)");
+      mount_.link = end_effector;
+    } else if (mode != "eye_to_hand") {
+      check.fail("~mode: '" + mode + "' is not one of eye_to_hand, eye_in_hand");
+    }
     if (!initial_guess_.empty() && initial_guess_.size() != 7)
-      check.fail("~initial_guess: expected [x, y, z, qx, qy, qz, qw] (the camera in the base frame), got " +
+      check.fail("~initial_guess: expected [x, y, z, qx, qy, qz, qw] (the camera in the " +
+                 std::string(mount_.eye_in_hand() ? "end effector" : "base") + " frame), got " +
                  std::to_string(initial_guess_.size()) + " values");
     calibrator_ = std::make_unique<diffdope::Calibrator>(options_);
     joints_ = std::make_unique<diffdope::JointHistory>(stillness_);
@@ -110,6 +121,9 @@ void CalibrationNodelet::loadRobot() {
     robot_ = std::make_unique<diffdope::RobotModel>(
         diffdope::RobotModel::parse_urdf(urdf, base_dir, "parameter " + key, resolver));
     if (base_frame_.empty()) base_frame_ = robot_->root_link();
+    mount_frame_ = mount_.eye_in_hand() ? mount_.link : base_frame_;
+    if (mount_.eye_in_hand() && !robot_->has_link(mount_.link))
+      throw std::runtime_error("~end_effector_frame '" + mount_.link + "' is not a link of the robot");
   } catch (const std::exception& e) {
     robot_error_ = std::string("robot description unusable: ") + e.what();
     errors_.error("robot", robot_error_);

@@ -52,15 +52,18 @@ class CalibrationNodelet : public nodelet::Nodelet {
   bool onCompute(ComputeCalibration::Request&, ComputeCalibration::Response& res);
   bool onSave(std_srvs::Trigger::Request&, std_srvs::Trigger::Response& res);
 
-  /// The initial guess, camera <- base: ~initial_guess, else TF (base -> camera frame). Throws with the reason.
+  /// The initial guess, camera <- mount frame: ~initial_guess, else TF (mount -> camera frame). Throws with the
+  /// reason.
   diffdope::Pose initialGuess(const std::string& camera_frame);
 
   // Parameters (read once).
   std::string base_frame_, camera_frame_, output_file_;
+  diffdope::CameraMount mount_;  // ~mode eye_in_hand: the camera rides on ~end_effector_frame
+  std::string mount_frame_;      // the frame the result is in: base_frame_, or the end effector eye in hand
   bool use_rgb_ = false, use_mask_ = false, publish_tf_ = true;
   double max_interval_ = 0.02;              // s: rgb / mask / camera_info stamp vs the depth's
   double min_configuration_change_ = 0.05;  // rad: a sample must differ from the others by this (some joint)
-  std::vector<double> initial_guess_;       // x y z qx qy qz qw of the camera in the base frame, or empty
+  std::vector<double> initial_guess_;       // x y z qx qy qz qw of the camera in the mount frame, or empty
   diffdope::CalibrationOptions options_;
   diffdope::StillnessOptions stillness_;
 

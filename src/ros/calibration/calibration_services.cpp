@@ -126,11 +126,11 @@ diffdope::Pose CalibrationNodelet::initialGuess(const std::string& camera_frame)
   try {
     // No waiting: the listener has run since start, and a timeout in simulated time never ends once the clock
     // stops (a bag that has finished).
-    const geometry_msgs::TransformStamped t = tf_buffer_->lookupTransform(base_frame_, camera_frame, ros::Time(0));
-    return pose_from_transform(t.transform, "TF " + base_frame_ + " -> " + camera_frame).inverse();
+    const geometry_msgs::TransformStamped t = tf_buffer_->lookupTransform(mount_frame_, camera_frame, ros::Time(0));
+    return pose_from_transform(t.transform, "TF " + mount_frame_ + " -> " + camera_frame).inverse();
   } catch (const tf2::TransformException& e) {
     throw std::runtime_error("no initial guess: set ~initial_guess [x, y, z, qx, qy, qz, qw] (the camera in '" +
-                             base_frame_ + "') or publish a rough TF " + base_frame_ + " -> " + camera_frame + " (" +
+                             mount_frame_ + "') or publish a rough TF " + mount_frame_ + " -> " + camera_frame + " (" +
                              e.what() + ")");
   }
 }
@@ -151,15 +151,15 @@ bool CalibrationNodelet::onCompute(ComputeCalibration::Request&, ComputeCalibrat
     guess = initialGuess(camera_frame_);
     std::vector<diffdope::CalibrationCapture> captures;
     for (const Sample& s : samples_) captures.push_back(s.capture);
-    r = calibrator_->calibrate(*robot_, captures, guess);
+    r = calibrator_->calibrate(*robot_, captures, guess, mount_);
   } catch (const std::exception& e) {
     return fail(e.what());
   }
-  const diffdope::Pose base_from_camera = r.camera_from_base.inverse();
+  const diffdope::Pose mount_from_camera = r.camera_from_mount.inverse();
   res.transform.header.stamp = ros::Time::now();
-  res.transform.header.frame_id = base_frame_;
+  res.transform.header.frame_id = mount_frame_;
   res.transform.child_frame_id = camera_frame_;
-  res.transform.transform = transform_to_msg(base_from_camera);
+  res.transform.transform = transform_to_msg(mount_from_camera);
   for (const diffdope::CaptureResidual& c : r.captures) {
     CaptureResidual m;
     m.name = c.name;
@@ -172,11 +172,13 @@ bool CalibrationNodelet::onCompute(ComputeCalibration::Request&, ComputeCalibrat
   }
   res.plausible = r.plausible;
   res.confidence = r.confidence;
+  res.position_std = r.position_std;
+  res.rotation_std = r.rotation_std;
   res.success = true;
-  const diffdope::Pose base_from_guess = guess.inverse();
+  const diffdope::Pose mount_from_guess = guess.inverse();
   res.message = "calibrated from " + std::to_string(samples_.size()) + " sample(s) in " +
                 format_fixed(r.time_ms / 1e3, 1) + " s: moved " +
-                format_fixed(1e3 * (base_from_camera.t - base_from_guess.t).norm(), 1) + " mm from the guess, " +
+                format_fixed(1e3 * (mount_from_camera.t - mount_from_guess.t).norm(), 1) + " mm from the guess, " +
                 (r.plausible ? "plausible" : "NOT plausible (check the residuals)") + ", confidence " +
                 format_fixed(r.confidence, 2);
   // An implausible result is returned (and may be saved) but not put on TF, where it would become the next
@@ -186,12 +188,12 @@ bool CalibrationNodelet::onCompute(ComputeCalibration::Request&, ComputeCalibrat
     // break the tree, so the calibration goes to that parent (base -> camera_link), composed with the driver's.
     geometry_msgs::TransformStamped on_tf = res.transform;
     std::string parent;
-    if (tf_buffer_->_getParent(camera_frame_, ros::Time(0), parent) && !parent.empty() && parent != base_frame_) {
+    if (tf_buffer_->_getParent(camera_frame_, ros::Time(0), parent) && !parent.empty() && parent != mount_frame_) {
       try {
         const geometry_msgs::TransformStamped p = tf_buffer_->lookupTransform(parent, camera_frame_, ros::Time(0));
         const diffdope::Pose parent_from_camera = pose_from_transform(p.transform, "TF " + parent);
         on_tf.child_frame_id = parent;
-        on_tf.transform = transform_to_msg(base_from_camera * parent_from_camera.inverse());
+        on_tf.transform = transform_to_msg(mount_from_camera * parent_from_camera.inverse());
       } catch (const std::exception& e) {
         on_tf.child_frame_id.clear();
         res.message += "; not published on TF: " + camera_frame_ + " has the parent " + parent +
@@ -200,7 +202,7 @@ bool CalibrationNodelet::onCompute(ComputeCalibration::Request&, ComputeCalibrat
     }
     if (!on_tf.child_frame_id.empty()) {
       static_tf_->sendTransform(on_tf);
-      res.message += "; published on TF as " + base_frame_ + " -> " + on_tf.child_frame_id;
+      res.message += "; published on TF as " + mount_frame_ + " -> " + on_tf.child_frame_id;
     }
   } else if (publish_tf_) {
     res.message += "; not published on TF";
@@ -216,12 +218,12 @@ bool CalibrationNodelet::onSave(std_srvs::Trigger::Request&, std_srvs::Trigger::
     res.message = "nothing to save: call ~compute first";
     return true;
   }
-  const diffdope::Pose base_from_camera = pose_from_transform(result_->transform.transform, "calibration");
+  const diffdope::Pose mount_from_camera = pose_from_transform(result_->transform.transform, "calibration");
   try {
     const std::filesystem::path path(output_file_);
     if (path.has_parent_path()) std::filesystem::create_directories(path.parent_path());
     std::ofstream f(output_file_);
-    f << diffdope::easy_handeye_yaml(base_from_camera, base_frame_, camera_frame_);
+    f << diffdope::easy_handeye_yaml(mount_from_camera, mount_frame_, camera_frame_, mount_.eye_in_hand());
     if (!f) throw std::runtime_error("cannot write");
   } catch (const std::exception& e) {
     res.message = output_file_ + ": " + e.what();

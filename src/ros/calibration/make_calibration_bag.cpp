@@ -1,11 +1,12 @@
 // diffdope_make_calibration_bag: writes the data of the calibration node's rostest and demo: the generated arm
 // (URDF and meshes), a bag in which it holds still in a few configurations and moves between them, the true
-// camera pose and a guess 5 cm / 10 degrees off.
+// camera pose and a guess 5 cm / 10 degrees off. The arm stands on a table with a box and a can beside it.
 //
-//   diffdope_make_calibration_bag --out DIR [--configurations N (4)] [--rate HZ (3)] [--seed S (1)]
+//   diffdope_make_calibration_bag --out DIR [--configurations N (4)] [--rate HZ (3)] [--seed S (1)] [--eye-in-hand]
 //
 // DIR/robot/robot.urdf (+ meshes), DIR/calibration.bag, DIR/truth.yaml (truth: [x, y, z, qx, qy, qz, qw], the
-// camera in base_link) and DIR/guess.yaml (initial_guess: [...], the same 5 cm / 10 deg off, for rosparam load).
+// camera in base_link; --eye-in-hand: the camera on the hand's bracket, its pose in link5) and DIR/guess.yaml
+// (initial_guess: [...], the same 5 cm / 10 deg off, for rosparam load).
 // Topics, the arm still for 2 s in each configuration and moving for 1 s between them (stamps from 1000 s):
 //   /camera/depth/image_rect  sensor_msgs/Image 16UC1 millimetres (0 = no reading), camera_color_optical_frame
 //   /camera/depth/camera_info sensor_msgs/CameraInfo
@@ -22,6 +23,7 @@
 #include <fstream>
 #include <iostream>
 #include <random>
+#include <set>
 
 #include "diffdope/input_files.hpp"
 #include "diffdope_ros/conversions.hpp"
@@ -50,11 +52,17 @@ int main(int argc, char** argv) {
   int configurations = 4;
   double rate = 3;
   long long seed = 1;
+  bool eye_in_hand = false;
   try {
     for (int i = 1; i < argc; ++i) {
       const std::string k = argv[i];
+      if (k == "--eye-in-hand") {
+        eye_in_hand = true;
+        continue;
+      }
       if (k == "-h" || k == "--help" || i + 1 >= argc) {
-        std::cerr << "usage: diffdope_make_calibration_bag --out DIR [--configurations N] [--rate HZ] [--seed S]\n";
+        std::cerr << "usage: diffdope_make_calibration_bag --out DIR [--configurations N] [--rate HZ] [--seed S]"
+                     " [--eye-in-hand]\n";
         return k == "-h" || k == "--help" ? 0 : 2;
       }
       const std::string v = argv[++i];
@@ -75,11 +83,21 @@ int main(int argc, char** argv) {
     const RobotModel model = RobotModel::load_urdf(robot.urdf_path);
     const GeneratedView view = generated_view();
     const Camera& cam = view.camera;
-    const Pose& truth = view.camera_from_base;
+    // The unknown: camera <- base on a stand, camera <- link5 on the hand's bracket (procedural_robot.hpp).
+    Pose truth = view.camera_from_base;
+    Eigen::Vector3d centre = view.centre;
+    std::set<std::string> hand_links;  // not drawn: the bracket's camera does not see its own hand
+    if (eye_in_hand) {
+      const Pose base_from_hand = model.link_poses(hand_reference_configuration()).at(kGeneratedHandLink);
+      truth = generated_hand_camera(base_from_hand);
+      centre = base_from_hand.inverse() * view.centre;
+      hand_links = model.links_fixed_to(kGeneratedHandLink);
+    }
     std::mt19937_64 rng{static_cast<uint64_t>(seed)};
     std::vector<std::map<std::string, double>> qs;
-    for (int k = 0; k < configurations; ++k) qs.push_back(random_configuration(robot, rng));
-    const Pose guess = perturb_pose(truth, view.centre, 10 * M_PI / 180, 0.05, rng);
+    for (int k = 0; k < configurations; ++k)
+      qs.push_back(eye_in_hand ? random_hand_configuration(robot, rng) : random_configuration(robot, rng));
+    const Pose guess = perturb_pose(truth, centre, 10 * M_PI / 180, 0.05, rng);
     std::ofstream(fs::path(out) / "truth.yaml") << "truth: " << pose_list(truth.inverse()) << "\n";
     std::ofstream(fs::path(out) / "guess.yaml") << "initial_guess: " << pose_list(guess.inverse()) << "\n";
 
@@ -119,10 +137,12 @@ int main(int argc, char** argv) {
     for (int f = 0; f / rate <= duration; ++f) {
       const double tau = f / rate;
       std::map<std::string, double> v;
-      const Mesh posed = merge_meshes(model.posed_visuals(joints_at(tau, &v)), "arm");
-      SyntheticNoise noise;
-      noise.background_depth = 2.5;
-      const SyntheticScene s = synthesize_scene(*renderer, cam, {{&posed, truth}}, noise, uint32_t(seed * 1000 + f));
+      const auto q = joints_at(tau, &v);
+      const Mesh posed = merge_meshes(model.posed_visuals(q, hand_links), "arm");
+      const Pose camera_from_base =
+          eye_in_hand ? truth * model.link_poses(q).at(kGeneratedHandLink).inverse() : truth;
+      const SyntheticScene s = synthesize_robot_scene(*renderer, cam, posed, camera_from_base, RobotSceneOptions(),
+                                                      uint32_t(seed * 1000 + f));
       std_msgs::Header h;
       h.stamp = t0 + ros::Duration(tau);
       h.frame_id = "camera_color_optical_frame";
