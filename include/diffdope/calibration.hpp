@@ -77,8 +77,11 @@ struct CalibrationResult {
   /// How firmly the captures pin the camera down: one standard deviation of the camera's position (metres) and
   /// of its rotation (radians), each along its least constrained direction, from the loss's curvature at the
   /// result (pose_curvature.hpp; a single capture leaves a direction weak). -1: not probed
-  /// (refiner.probe_distance = 0) or the probe left the image.
+  /// (refiner.probe_distance = 0), the probe left the image, or the robot is rendered nowhere (undetermined).
   double position_std = -1, rotation_std = -1;
+  /// A later pass could not start: the pass before left the robot out of view. Its result is returned, not
+  /// plausible, confidence 0.
+  bool diverged = false;
   /// Every capture passes the refiner's verdict thresholds (mask IoU, depth inliers) and position_std is within
   /// CalibrationOptions::max_position_std.
   bool plausible = false;
@@ -98,8 +101,11 @@ struct CameraMount {
   /// the unknown, so they say nothing of it. A given mask should leave them out too.
   std::string link;
   bool eye_in_hand() const { return !link.empty(); }
+  /// Throws std::invalid_argument for a link the robot does not have, or one fixed to its base (a camera there
+  /// is eye to hand).
+  void check(const RobotModel& robot) const;
   /// The robot's visuals at `joint_positions` in the mount's frame (the base, or the link), less the links fixed
-  /// to the link. Throws std::invalid_argument for a link the robot does not have.
+  /// to the link. Throws as check().
   std::vector<MeshPart> posed_robot(const RobotModel& robot, const std::map<std::string, double>& joint_positions) const;
 };
 

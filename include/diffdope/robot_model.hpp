@@ -2,6 +2,7 @@
 // A robot read from URDF (urdfdom): its links' visual meshes and the forward kinematics that place them in the
 // root link's frame (the robot base) for given joint positions. Camera-to-robot calibration renders a robot this
 // way (calibration.hpp). Units: metres, radians (prismatic joints: metres).
+#include <limits>
 #include <map>
 #include <memory>
 #include <set>
@@ -48,10 +49,16 @@ class RobotModel {
     Eigen::Vector3d axis = Eigen::Vector3d::UnitX();
     std::string mimic;  // the joint this one follows (q = multiplier * q_mimic + offset)
     double multiplier = 1, offset = 0;
+    /// The URDF's limits (revolute, prismatic); infinite for continuous and fixed joints.
+    double lower = -std::numeric_limits<double>::infinity(), upper = std::numeric_limits<double>::infinity();
   };
+  /// How far link_poses() lets a position pass its joint's limits (joint_states run a little past them) before it
+  /// refuses it as a wrong unit or joint.
+  static constexpr double kJointLimitSlackRadians = 0.1, kJointLimitSlackMetres = 0.01;
 
   /// Root (base) from every link at `positions` (joint name -> radians or metres; extra names are ignored).
-  /// Throws std::invalid_argument naming a needed joint that is missing or not finite.
+  /// Throws std::invalid_argument naming a needed joint that is missing, not finite or beyond its limits by
+  /// more than kJointLimitSlack*.
   std::map<std::string, Pose> link_poses(const std::map<std::string, double>& positions) const;
   /// Every visual placed in the base frame at `positions` (for merge_meshes()), but those of `leave_out`'s links.
   std::vector<MeshPart> posed_visuals(const std::map<std::string, double>& positions,

@@ -42,10 +42,20 @@ Calibrator::Calibrator(const CalibrationOptions& options)
       refiner_(options.refiner),
       renderer_(make_cpu_renderer(options.refiner.render)) {}
 
+void CameraMount::check(const RobotModel& robot) const {
+  if (!eye_in_hand()) return;
+  if (!robot.has_link(link)) throw std::invalid_argument("the robot has no link '" + link + "' to carry the camera");
+  if (robot.links_fixed_to(link).count(robot.root_link()))
+    throw std::invalid_argument("link '" + link + "' " +
+                                (link == robot.root_link() ? "is the robot's base"
+                                                           : "is fixed to the robot's base '" + robot.root_link() + "'") +
+                                ": a camera there does not move with the arm (calibrate eye to hand)");
+}
+
 std::vector<MeshPart> CameraMount::posed_robot(const RobotModel& robot,
                                                const std::map<std::string, double>& joint_positions) const {
   if (!eye_in_hand()) return robot.posed_visuals(joint_positions);
-  if (!robot.has_link(link)) throw std::invalid_argument("the robot has no link '" + link + "' to carry the camera");
+  check(robot);
   std::vector<MeshPart> parts = robot.posed_visuals(joint_positions, robot.links_fixed_to(link));
   const Pose link_from_base = robot.link_poses(joint_positions).at(link).inverse();
   for (MeshPart& p : parts) p.pose = link_from_base * p.pose;
@@ -60,8 +70,11 @@ CalibrationResult Calibrator::calibrate(const RobotModel& robot, const std::vect
     throw std::invalid_argument("calibrate: " + std::to_string(captures.size()) + " captures; at most " +
                                 std::to_string(input_limits::kMaxCaptures) + " (input_limits.hpp)");
   if (!initial.is_valid(1e-4)) throw std::invalid_argument("calibrate: the initial transform is not a valid pose");
-  if (mount.eye_in_hand() && !robot.has_link(mount.link))
-    throw std::invalid_argument("calibrate: the robot has no link '" + mount.link + "' to carry the camera");
+  try {
+    mount.check(robot);
+  } catch (const std::invalid_argument& e) {
+    throw std::invalid_argument(std::string("calibrate: ") + e.what());
+  }
   std::vector<Mesh> posed;
   posed.reserve(captures.size());
   std::vector<RefineView> views;
@@ -72,10 +85,11 @@ CalibrationResult Calibrator::calibrate(const RobotModel& robot, const std::vect
     try {
       c.observed.validate(c.camera);
       if (!c.observed.has_depth()) throw std::invalid_argument("no depth image (calibration needs depth)");
-      posed.push_back(merge_meshes(mount.posed_robot(robot, c.joint_positions), robot.name() + " at " + c.name));
-      if (posed.back().num_triangles() == 0)
+      const std::vector<MeshPart> parts = mount.posed_robot(robot, c.joint_positions);
+      if (parts.empty())
         throw std::invalid_argument("every link with a visual is fixed to the camera's link '" + mount.link +
                                     "': nothing moves in the image");
+      posed.push_back(merge_meshes(parts, robot.name() + " at " + c.name));
     } catch (const std::exception& e) {
       throw std::invalid_argument(who + e.what());
     }
@@ -111,9 +125,15 @@ CalibrationResult Calibrator::calibrate(const RobotModel& robot, const std::vect
     refiner_.on_iteration = nullptr;
     if (on_iteration)
       refiner_.on_iteration = [this, pass](int k, int total, double loss) { on_iteration(pass, k, total, loss); };
-    out.refine = refiner_.refine_views(views, {from}, centre,
-                                       pass_options(pass, (from * centre).norm(), captures.front().camera));
-    if (!out.refine.error.empty()) throw std::invalid_argument("calibrate: " + out.refine.error);
+    RefineResult r = refiner_.refine_views(views, {from}, centre,
+                                           pass_options(pass, (from * centre).norm(), captures.front().camera));
+    if (!r.error.empty()) {
+      if (pass == 0) throw std::invalid_argument("calibrate: " + r.error);
+      // The pass before drove the robot out of view: its result stands, judged a divergence.
+      out.diverged = true;
+      break;
+    }
+    out.refine = std::move(r);
     from = out.refine.pose;
     ++out.passes;
   }
@@ -170,9 +190,10 @@ RefinerOptions Calibrator::pass_options(int pass, double robot_distance, const C
 }
 
 void Calibrator::judge_firmness(CalibrationResult& out) const {
-  out.plausible = out.refine.plausible;
-  out.confidence = out.refine.confidence;
-  if (!out.refine.curvature.valid) return;
+  out.plausible = out.refine.plausible && !out.diverged;
+  out.confidence = out.diverged ? 0.0 : out.refine.confidence;
+  // No covariance (the robot rendered nowhere in the views): nothing is pinned down; position_std stays -1.
+  if (!out.refine.curvature.valid || out.refine.covariance.isZero(0)) return;
   // The twist (v, w) about the pivot p moves the camera's origin, relative to the robot, by -(v + p x w).
   const Matrix6d& cov = out.refine.covariance;
   Eigen::Matrix<double, 3, 6> J;

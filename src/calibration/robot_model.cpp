@@ -104,6 +104,13 @@ RobotModel::Joint joint_of(const urdf::Joint& j, const std::string& parent, cons
     if (!joint.axis.allFinite() || joint.axis.norm() < 1e-9) throw std::runtime_error(where + ": zero axis");
     joint.axis.normalize();
   }
+  // Revolute and prismatic joints carry limits (urdfdom refuses them without); a position far outside is a
+  // wrong unit or a wrong joint, not a robot pose.
+  if ((joint.type == Joint::Type::kRevolute || joint.type == Joint::Type::kPrismatic) && j.limits &&
+      std::isfinite(j.limits->lower) && std::isfinite(j.limits->upper) && j.limits->lower <= j.limits->upper) {
+    joint.lower = j.limits->lower;
+    joint.upper = j.limits->upper;
+  }
   if (j.mimic) {
     joint.mimic = j.mimic->joint_name;
     joint.multiplier = j.mimic->multiplier;
@@ -257,7 +264,16 @@ double RobotModel::position_of(const Joint& j, const std::map<std::string, doubl
   const auto it = positions.find(name);
   if (it == positions.end()) throw std::invalid_argument("joint '" + name + "' has no position");
   if (!std::isfinite(it->second)) throw std::invalid_argument("joint '" + name + "': position is not finite");
-  return j.mimic.empty() ? it->second : j.multiplier * it->second + j.offset;
+  const double q = j.mimic.empty() ? it->second : j.multiplier * it->second + j.offset;
+  const double slack = j.type == Joint::Type::kPrismatic ? kJointLimitSlackMetres : kJointLimitSlackRadians;
+  // (A mimic follows another joint: its own limits are often nominal.)
+  if (j.mimic.empty() && (q < j.lower - slack || q > j.upper + slack)) {
+    std::ostringstream m;
+    m << "joint '" << j.name << "': position " << q << " is outside its limits [" << j.lower << ", " << j.upper
+      << "] (radians, or metres for a prismatic joint)";
+    throw std::invalid_argument(m.str());
+  }
+  return q;
 }
 
 std::map<std::string, Pose> RobotModel::link_poses(const std::map<std::string, double>& positions) const {

@@ -15,6 +15,7 @@
 #include <fstream>
 #include <iostream>
 #include <map>
+#include <optional>
 #include <nlohmann/json.hpp>
 #include <opencv2/core/utils/logger.hpp>
 #include <opencv2/imgcodecs.hpp>
@@ -43,8 +44,8 @@ namespace {
 const char* kUsage =
     "usage: diffdope_calibrate --urdf FILE --captures DIR --camera FILE --init FILE --out DIR\n"
     "                          [--package-path NAME=DIR]... [--depth-scale M] [--config FILE] [--passes N]\n"
-    "                          [--mask-margin M] [--robot-base-frame NAME] [--camera-frame NAME] [--truth FILE]\n"
-    "                          [--quiet]\n"
+    "                          [--mask-margin M] [--eye-in-hand LINK] [--robot-base-frame NAME]\n"
+    "                          [--camera-frame NAME] [--truth FILE] [--quiet]\n"
     "       diffdope_calibrate --generate DIR [--count N] [--seed S] [--init-error CM DEG] [--no-mask] [--no-rgb]\n"
     "                                                 [--no-table] [--eye-in-hand link5]\n"
     "\n"
@@ -116,6 +117,7 @@ std::map<std::string, double> read_joints(const std::string& path) {
 struct Args {
   std::string urdf, captures, camera, init, out, config, truth, base_frame, camera_frame = "camera_color_optical_frame";
   std::string hand_link;  // eye in hand: the link the camera rides on
+  bool hand_set = false;
   std::map<std::string, std::string> packages;
   double depth_scale = 0.001, mask_margin = -1;
   int passes = 0;
@@ -199,13 +201,13 @@ int run(const Args& a) {
     QuietStderr quiet;  // urdfdom and assimp print their own complaints
     return RobotModel::load_urdf(a.urdf, resolve);
   });
-  if (!a.hand_link.empty() && !robot.has_link(a.hand_link))
-    fail(a.urdf, "no link '" + a.hand_link + "' (--eye-in-hand: the link the camera rides on)");
+  const CameraMount mount{a.hand_link};
+  about(a.urdf, [&] { mount.check(robot); });  // (--eye-in-hand: a link of this robot that moves)
   std::vector<CalibrationCapture> captures = read_captures(a);
   for (const CalibrationCapture& c : captures)  // every joint the robot needs, named in the capture's file
     about((fs::path(a.captures) / c.name / "joints.json").string(), [&] { robot.link_poses(c.joint_positions); });
-  const CameraMount mount{a.hand_link};
   const Pose base_from_camera0 = read_pose_file(a.init);  // (mount <- camera: the base, or the hand's link)
+  const std::optional<Pose> truth = a.truth.empty() ? std::nullopt : std::optional<Pose>(read_pose_file(a.truth));
   const Pose initial = base_from_camera0.inverse();
 
   std::error_code ec;
@@ -265,6 +267,7 @@ int run(const Args& a) {
               {"moved_from_guess", {{"mm", moved_mm}, {"deg", moved_deg}}},
               {"plausible", r.plausible},
               {"confidence", r.confidence},
+              {"diverged", r.diverged},
               {"position_std_mm", r.position_std < 0 ? -1.0 : 1e3 * r.position_std},
               {"rotation_std_deg", r.rotation_std < 0 ? -1.0 : r.rotation_std * 180 / M_PI},
               {"passes", r.passes},
@@ -277,10 +280,9 @@ int run(const Args& a) {
                     {"depth_median_mm", c.depth_median_mm}, {"derived_mask", c.derived_mask}});
   result["captures"] = rows;
   std::string truth_line;
-  if (!a.truth.empty()) {
-    const Pose truth = read_pose_file(a.truth);  // base <- camera
-    const double mm = 1e3 * (base_from_camera.t - truth.t).norm();
-    const double deg = Eigen::AngleAxisd(base_from_camera.R * truth.R.transpose()).angle() * 180 / M_PI;
+  if (truth) {
+    const double mm = 1e3 * (base_from_camera.t - truth->t).norm();
+    const double deg = Eigen::AngleAxisd(base_from_camera.R * truth->R.transpose()).angle() * 180 / M_PI;
     result["error_vs_truth"] = {{"camera_position_mm", mm}, {"rotation_deg", deg}};
     truth_line = "error against " + a.truth + ": camera position " + fmt(mm, "%.2f") + " mm, rotation " +
                  fmt(deg, "%.3f") + " deg\n";
@@ -291,7 +293,7 @@ int run(const Args& a) {
   write_text((fs::path(a.out) / "residuals.txt").string(), table.str());
   write_text((fs::path(a.out) / "result.json").string(), result.dump(2) + "\n");
   if (!a.quiet) {
-    const std::string firmness = r.position_std < 0 ? std::string("(not probed)")
+    const std::string firmness = r.position_std < 0 ? std::string("(undetermined)")
                                                     : fmt(1e3 * r.position_std, "%.2f") + " mm / " +
                                                           fmt(r.rotation_std * 180 / M_PI, "%.3f") + " deg (1 sigma)";
     std::printf("%s", table.str().c_str());
@@ -300,7 +302,10 @@ int run(const Args& a) {
                 base.c_str(), base_from_camera.t.x(), base_from_camera.t.y(), base_from_camera.t.z(),
                 base_from_camera.quaternion_xyzw()[0], base_from_camera.quaternion_xyzw()[1],
                 base_from_camera.quaternion_xyzw()[2], base_from_camera.quaternion_xyzw()[3], moved_mm, moved_deg,
-                r.plausible ? "plausible" : "NOT plausible (check the overlays and the residuals)", r.confidence,
+                r.plausible ? "plausible"
+                : r.diverged ? "NOT plausible: a pass drove the robot out of view (diverged)"
+                             : "NOT plausible (check the overlays and the residuals)",
+                r.confidence,
                 firmness.c_str(), int(captures.size()), r.time_ms / 1e3, truth_line.c_str());
   }
   return 0;
@@ -333,7 +338,7 @@ int main(int argc, char** argv) {
       else if (k == "--config") a.config = v;
       else if (k == "--truth") a.truth = v;
       else if (k == "--robot-base-frame") a.base_frame = v;
-      else if (k == "--eye-in-hand") a.hand_link = v;
+      else if (k == "--eye-in-hand") a.hand_link = v, a.hand_set = true;
       else if (k == "--camera-frame") a.camera_frame = v;
       else if (k == "--depth-scale") a.depth_scale = parse_number_arg(k, v);
       else if (k == "--mask-margin") a.mask_margin = parse_number_arg(k, v);
@@ -355,6 +360,10 @@ int main(int argc, char** argv) {
       } else return usage_error("unknown option '" + k + "'");
     }
     if (!(a.depth_scale > 0)) return usage_error("--depth-scale must be positive");
+    if (a.camera_frame.empty()) return usage_error("--camera-frame: empty frame name");
+    if (a.hand_set && a.hand_link.empty()) return usage_error("--eye-in-hand: empty link name");
+    if (!a.hand_link.empty() && !a.base_frame.empty())
+      return usage_error("--robot-base-frame: eye in hand the result is in the --eye-in-hand link's frame");
   } catch (const std::invalid_argument& e) {
     return usage_error(e.what());
   }

@@ -109,8 +109,15 @@ TEST_F(CalibrateCli, EyeInHandFromFiveCentimetresAndTenDegrees) {
   for (const char* key : {"eye_on_hand: true", "robot_effector_frame: link5", "tracking_base_frame: "})
     EXPECT_NE(yaml.find(key), std::string::npos) << key << "\n" << yaml;
   EXPECT_NE(slurp(dir / "hand_out/calibration.launch").find(" link5 camera_color_optical_frame"), std::string::npos);
-  // A link the robot does not have names the URDF.
+  // A link the robot does not have, or its base, names the URDF; an empty name, or a base frame eye in hand,
+  // is a usage error.
   expect_error(run(files + " --eye-in-hand gripper"), (set / "robot/robot.urdf").string(), "no link 'gripper'");
+  expect_error(run(files + " --eye-in-hand base_link"), (set / "robot/robot.urdf").string(), "is the robot's base");
+  for (const char* usage : {" --eye-in-hand ''", " --eye-in-hand link5 --robot-base-frame base_link",
+                            " --camera-frame ''"}) {
+    const CliRun u = run(files + usage);
+    EXPECT_EQ(u.rc, 2) << usage << ": " << u.err;
+  }
 }
 
 TEST_F(CalibrateCli, CaptureErrorsNameTheFile) {

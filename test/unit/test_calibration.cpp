@@ -103,6 +103,19 @@ TEST(RobotModel, ReadsTheUrdfAndPlacesTheLinks) {
   EXPECT_THROW(robot.link_poses(q), std::invalid_argument);
   q["joint3"] = std::nan("");
   EXPECT_THROW(robot.link_poses(q), std::invalid_argument);
+  // A little past a limit passes (joint states overshoot); far past it is a wrong unit or joint.
+  q["joint3"] = 1.65;
+  EXPECT_NO_THROW(robot.link_poses(q));
+  for (const double wrong : {1.8, -90.0, 1e300}) {
+    q["joint3"] = wrong;
+    try {
+      robot.link_poses(q);
+      ADD_FAILURE() << wrong << " accepted";
+    } catch (const std::invalid_argument& e) {
+      EXPECT_NE(std::string(e.what()).find("joint 'joint3': position"), std::string::npos) << e.what();
+      EXPECT_NE(std::string(e.what()).find("outside its limits [-1.6, 1.6]"), std::string::npos) << e.what();
+    }
+  }
 }
 
 TEST(RobotModel, TheLinksFixedToALinkMoveWithIt) {
@@ -127,6 +140,9 @@ TEST(RobotModel, TheLinksFixedToALinkMoveWithIt) {
     EXPECT_LT(rotation_angle((base_from_hand * in_hand[k].pose).R, in_base[k].pose.R), 1e-6);
   }
   EXPECT_THROW(CameraMount{"gripper"}.posed_robot(robot, q), std::invalid_argument);
+  // A camera on the base, or on a link fixed to it, is eye to hand.
+  EXPECT_THROW(CameraMount{"base_link"}.check(robot), std::invalid_argument);
+  EXPECT_NO_THROW(CameraMount{"tool"}.check(robot));
   EXPECT_EQ(CameraMount().posed_robot(robot, q).size(), robot.visuals().size());
 }
 

@@ -122,8 +122,11 @@ void CalibrationNodelet::loadRobot() {
         diffdope::RobotModel::parse_urdf(urdf, base_dir, "parameter " + key, resolver));
     if (base_frame_.empty()) base_frame_ = robot_->root_link();
     mount_frame_ = mount_.eye_in_hand() ? mount_.link : base_frame_;
-    if (mount_.eye_in_hand() && !robot_->has_link(mount_.link))
-      throw std::runtime_error("~end_effector_frame '" + mount_.link + "' is not a link of the robot");
+    try {
+      mount_.check(*robot_);
+    } catch (const std::invalid_argument& e) {
+      throw std::runtime_error(std::string("~end_effector_frame: ") + e.what());
+    }
   } catch (const std::exception& e) {
     robot_error_ = std::string("robot description unusable: ") + e.what();
     errors_.error("robot", robot_error_);

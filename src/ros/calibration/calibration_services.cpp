@@ -179,7 +179,10 @@ bool CalibrationNodelet::onCompute(ComputeCalibration::Request&, ComputeCalibrat
   res.message = "calibrated from " + std::to_string(samples_.size()) + " sample(s) in " +
                 format_fixed(r.time_ms / 1e3, 1) + " s: moved " +
                 format_fixed(1e3 * (mount_from_camera.t - mount_from_guess.t).norm(), 1) + " mm from the guess, " +
-                (r.plausible ? "plausible" : "NOT plausible (check the residuals)") + ", confidence " +
+                (r.plausible ? "plausible"
+                 : r.diverged ? "NOT plausible: a pass drove the robot out of view (diverged)"
+                              : "NOT plausible (check the residuals)") +
+                ", confidence " +
                 format_fixed(r.confidence, 2);
   // An implausible result is returned (and may be saved) but not put on TF, where it would become the next
   // guess and every listener's camera pose.
