@@ -106,7 +106,8 @@ struct CameraMount {
   void check(const RobotModel& robot) const;
   /// The robot's visuals at `joint_positions` in the mount's frame (the base, or the link), less the links fixed
   /// to the link. Throws as check().
-  std::vector<MeshPart> posed_robot(const RobotModel& robot, const std::map<std::string, double>& joint_positions) const;
+  std::vector<MeshPart> posed_robot(const RobotModel& robot,
+                                    const std::map<std::string, double>& joint_positions) const;
 };
 
 class Calibrator {

@@ -46,10 +46,11 @@ void CameraMount::check(const RobotModel& robot) const {
   if (!eye_in_hand()) return;
   if (!robot.has_link(link)) throw std::invalid_argument("the robot has no link '" + link + "' to carry the camera");
   if (robot.links_fixed_to(link).count(robot.root_link()))
-    throw std::invalid_argument("link '" + link + "' " +
-                                (link == robot.root_link() ? "is the robot's base"
-                                                           : "is fixed to the robot's base '" + robot.root_link() + "'") +
-                                ": a camera there does not move with the arm (calibrate eye to hand)");
+    throw std::invalid_argument(
+        "link '" + link + "' " +
+        (link == robot.root_link() ? "is the robot's base"
+                                   : "is fixed to the robot's base '" + robot.root_link() + "'") +
+        ": a camera there does not move with the arm (calibrate eye to hand)");
 }
 
 std::vector<MeshPart> CameraMount::posed_robot(const RobotModel& robot,
@@ -225,7 +226,8 @@ std::string easy_handeye_yaml(const Pose& mount_from_camera, const std::string& 
   return y.str();
 }
 
-std::string static_transform_launch(const Pose& mount_from_camera, const std::string& mount, const std::string& camera) {
+std::string static_transform_launch(const Pose& mount_from_camera, const std::string& mount,
+                                    const std::string& camera) {
   const auto q = mount_from_camera.quaternion_xyzw();
   std::ostringstream l;
   l.precision(9);

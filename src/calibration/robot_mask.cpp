@@ -105,13 +105,21 @@ cv::Mat Calibrator::derive_mask(const Mesh& posed_robot, const Camera& camera, c
   // unless the robot at the estimate is there at that depth (the base's foot on the table). A plane must cover
   // 0.5 % of the image; the RANSAC tolerance (2 cm) admits a sensor's noise at a few metres, and what is removed
   // is what lies within 3 sigma of the plane's own spread (at least 5 mm).
+  // The observed points (camera frame), once; z = 0 where there is no reading.
+  std::vector<Eigen::Vector3d> cloud(size_t(camera.width) * size_t(camera.height), Eigen::Vector3d::Zero());
+  for (int y = 0; y < camera.height; ++y)
+    for (int x = 0; x < camera.width; ++x) {
+      const float z = d.at<float>(y, x);
+      if (z > 0 && std::isfinite(z))
+        cloud[size_t(y) * size_t(camera.width) + size_t(x)] = back_project(camera, x, y, z);
+    }
+  const auto point = [&](int x, int y) -> const Eigen::Vector3d& {
+    return cloud[size_t(y) * size_t(camera.width) + size_t(x)];
+  };
   std::vector<Eigen::Vector3d> outside;
   for (int y = 0; y < camera.height; y += 2)
-    for (int x = 0; x < camera.width; x += 2) {
-      const float z = d.at<float>(y, x);
-      if (z > 0 && std::isfinite(z) && !within_reach.at<uchar>(y, x))
-        outside.push_back(back_project(camera, x, y, z));
-    }
+    for (int x = 0; x < camera.width; x += 2)
+      if (point(x, y).z() > 0 && !within_reach.at<uchar>(y, x)) outside.push_back(point(x, y));
   const size_t min_points = size_t(0.005 * camera.width * camera.height / 4);
   const double tolerance = 0.02;
   std::mt19937 rng(1);
@@ -130,17 +138,15 @@ cv::Mat Calibrator::derive_mask(const Mesh& posed_robot, const Camera& camera, c
     const double band = std::clamp(3 * spread, 0.005, tolerance);
     cv::Mat on_plane = cv::Mat::zeros(camera.height, camera.width, CV_8U);
     for (int y = 0; y < camera.height; ++y)
-      for (int x = 0; x < camera.width; ++x) {
-        const float z = d.at<float>(y, x);
-        if (z > 0 && std::isfinite(z) && plane.distance(back_project(camera, x, y, z)) <= band)
-          on_plane.at<uchar>(y, x) = 255;
-      }
+      for (int x = 0; x < camera.width; ++x)
+        if (point(x, y).z() > 0 && plane.distance(point(x, y)) <= band) on_plane.at<uchar>(y, x) = 255;
     cv::Mat labels;
     const int n_labels = cv::connectedComponents(on_plane, labels, 8, CV_32S);
     std::vector<char> reaches_outside(size_t(n_labels), 0);
     for (int y = 0; y < camera.height; ++y)
       for (int x = 0; x < camera.width; ++x)
-        if (on_plane.at<uchar>(y, x) && !within_reach.at<uchar>(y, x)) reaches_outside[size_t(labels.at<int>(y, x))] = 1;
+        if (on_plane.at<uchar>(y, x) && !within_reach.at<uchar>(y, x))
+          reaches_outside[size_t(labels.at<int>(y, x))] = 1;
     for (int y = 0; y < camera.height; ++y)
       for (int x = 0; x < camera.width; ++x) {
         if (!mask.at<uchar>(y, x) || !on_plane.at<uchar>(y, x) || !reaches_outside[size_t(labels.at<int>(y, x))])

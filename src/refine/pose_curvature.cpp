@@ -106,7 +106,8 @@ PoseCurvature probe_pose_curvature(Renderer& renderer, const std::vector<ProbeVi
   for (const double t : totals)
     if (!std::isfinite(t)) return out;
   Matrix6d Hq;
-  for (int i = 0; i < 6; ++i) Hq.col(i) = (Linv * gradients[size_t(2 * i)] - Linv * gradients[size_t(2 * i + 1)]) / (2 * h);
+  for (int i = 0; i < 6; ++i)
+    Hq.col(i) = (Linv * gradients[size_t(2 * i)] - Linv * gradients[size_t(2 * i + 1)]) / (2 * h);
   Hq = 0.5 * (Hq + Hq.transpose()).eval();
   out.hessian = L * Hq * L.transpose();
 

@@ -249,8 +249,9 @@ void RefineRun::judge_result(Renderer& renderer, RefineResult& res, int rendered
   const Mesh& mesh0 = *meshes_.front();
   if (o.probe_distance > 0 && std::isfinite(res.loss.total)) {
     if (one_view) {
-      res.curvature = probe_pose_curvature(renderer, fine_[0].cam, mesh0, fine_[0].obs, loss_, res.pose,
-                                           o.probe_distance, mesh0.symmetry.free_twists(res.pose, res.pose * mesh0.center()));
+      res.curvature =
+          probe_pose_curvature(renderer, fine_[0].cam, mesh0, fine_[0].obs, loss_, res.pose, o.probe_distance,
+                               mesh0.symmetry.free_twists(res.pose, res.pose * mesh0.center()));
     } else {  // views of one pose (a calibration's captures): their mean loss, about the common pivot
       std::vector<ProbeView> views;
       for (size_t v = 0; v < meshes_.size(); ++v) views.push_back({fine_[v].cam, *meshes_[v], fine_[v].obs});

@@ -101,8 +101,8 @@ SyntheticScene synthesize_robot_scene(Renderer& renderer, const Camera& camera, 
     objects.push_back({&can, at(-0.05, 0.30, 0.06)});
   }
   if (options.occluder)  // over part of the upper arm, a fifth of the way from it to the camera
-    objects.push_back({&occluder, Pose(Eigen::Matrix3d::Identity(),
-                                       0.8 * (camera_from_base * generated_view().centre) + Eigen::Vector3d(0.04, 0, 0))});
+    objects.push_back({&occluder, Pose(Eigen::Matrix3d::Identity(), 0.8 * (camera_from_base * generated_view().centre) +
+                                                                     Eigen::Vector3d(0.04, 0, 0))});
   return synthesize_scene(renderer, camera, objects, options.noise, seed);
 }
 

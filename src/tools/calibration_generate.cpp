@@ -7,7 +7,7 @@
 #include <set>
 #include <vector>
 
-#include "diffdope/calibration.hpp"
+#include "diffdope/robot_model.hpp"
 #include "diffdope/procedural_robot.hpp"
 #include "diffdope/synthetic.hpp"
 #include "tool_io.hpp"
@@ -43,7 +43,6 @@ int generate_calibration_set(const GenerateOptions& o) {
   const RobotModel model = RobotModel::load_urdf(robot.urdf_path);
   const GeneratedView view = generated_view();
   const Camera& cam = view.camera;
-  const CameraMount mount{o.eye_in_hand ? kGeneratedHandLink : ""};
   // The unknown: camera <- base on a stand, camera <- hand on the bracket; the guess is moved about the arm's
   // centre in the mount's frame.
   Pose truth = view.camera_from_base;
@@ -59,22 +58,23 @@ int generate_calibration_set(const GenerateOptions& o) {
   const std::set<std::string> hand_links =
       o.eye_in_hand ? model.links_fixed_to(kGeneratedHandLink) : std::set<std::string>{};
   for (int k = 0; k < o.count; ++k) {
+    // The bracket's camera does not see its own hand: the scene leaves those links out, and so does the mask.
     std::map<std::string, double> q;
     Pose camera_from_base = truth;
+    Mesh arm;
     if (o.eye_in_hand) {  // a configuration whose view shows enough of the arm (the hand's links say nothing)
       for (int tries = 0;; ++tries) {
         q = random_hand_configuration(robot, rng);
-        const Mesh seen = merge_meshes(mount.posed_robot(model, q), "seen");
-        const RenderImage img = renderer->render(cam, seen, {truth})[0];
+        camera_from_base = truth * model.link_poses(q).at(kGeneratedHandLink).inverse();
+        arm = merge_meshes(model.posed_visuals(q, hand_links), "arm");
+        const RenderImage img = renderer->render(cam, arm, {camera_from_base})[0];
         if (cv::countNonZero(img.coverage >= 0.5f) >= kMinHandViewCoverage * cam.width * cam.height) break;
         if (tries == 100) throw std::runtime_error("no configuration near the reference shows the arm");
       }
-      camera_from_base = truth * model.link_poses(q).at(kGeneratedHandLink).inverse();
     } else {
       q = random_configuration(robot, rng);
+      arm = merge_meshes(model.posed_visuals(q), "arm");
     }
-    // The bracket's camera does not see its own hand: the scene leaves those links out, and so does the mask.
-    const Mesh arm = merge_meshes(model.posed_visuals(q, hand_links), "arm");
     RobotSceneOptions scene;
     scene.table = o.table;
     scene.occluder = k % 3 == 1;  // every third capture has a box floating in front of the upper arm

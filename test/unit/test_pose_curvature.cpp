@@ -134,7 +134,8 @@ TEST(PoseCurvature, ViewsOfOnePoseWeighTheirMeanLoss) {
   const Camera cam{420, 420, 159.5, 119.5, 320, 240};
   const Mesh block = make_l_block(0.12, make_label_texture(128, 3));
   const Mesh cube = make_box(Eigen::Vector3d(0.04, 0.04, 0.04), make_label_texture(32, 4));
-  const Mesh other = merge_meshes({{&block, Pose()}, {&cube, Pose(Eigen::Matrix3d::Identity(), Eigen::Vector3d(0.1, 0, 0))}}, "other");
+  const Mesh other =
+      merge_meshes({{&block, Pose()}, {&cube, Pose(Eigen::Matrix3d::Identity(), Eigen::Vector3d(0.1, 0, 0))}}, "other");
   Vector6d d;
   d << 0, 0, 0, 0.5, -0.3, 0.2;
   const Pose pose(se3_exp(d).R, Eigen::Vector3d(0.0, 0.01, 0.6));

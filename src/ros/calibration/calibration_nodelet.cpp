@@ -58,7 +58,8 @@ void CalibrationNodelet::onInit() {
     check.above("~max_interval", max_interval_, 0, 10, " s");
     check("~min_configuration_change", min_configuration_change_, 0, 10, " rad");
     if (mode == "eye_in_hand") {
-      if (end_effector.empty()) check.fail("~mode eye_in_hand needs ~end_effector_frame (the link the camera rides on)");
+      if (end_effector.empty())
+        check.fail("~mode eye_in_hand needs ~end_effector_frame (the link the camera rides on)");
       mount_.link = end_effector;
     } else if (mode != "eye_to_hand") {
       check.fail("~mode: '" + mode + "' is not one of eye_to_hand, eye_in_hand");
@@ -121,7 +122,6 @@ void CalibrationNodelet::loadRobot() {
     robot_ = std::make_unique<diffdope::RobotModel>(
         diffdope::RobotModel::parse_urdf(urdf, base_dir, "parameter " + key, resolver));
     if (base_frame_.empty()) base_frame_ = robot_->root_link();
-    mount_frame_ = mount_.eye_in_hand() ? mount_.link : base_frame_;
     try {
       mount_.check(*robot_);
     } catch (const std::invalid_argument& e) {

@@ -59,7 +59,8 @@ class CalibrationNodelet : public nodelet::Nodelet {
   // Parameters (read once).
   std::string base_frame_, camera_frame_, output_file_;
   diffdope::CameraMount mount_;  // ~mode eye_in_hand: the camera rides on ~end_effector_frame
-  std::string mount_frame_;      // the frame the result is in: base_frame_, or the end effector eye in hand
+  /// The frame the guess and the result are in: the base, or the end effector eye in hand.
+  const std::string& mountFrame() const { return mount_.eye_in_hand() ? mount_.link : base_frame_; }
   bool use_rgb_ = false, use_mask_ = false, publish_tf_ = true;
   double max_interval_ = 0.02;              // s: rgb / mask / camera_info stamp vs the depth's
   double min_configuration_change_ = 0.05;  // rad: a sample must differ from the others by this (some joint)

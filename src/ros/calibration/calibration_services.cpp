@@ -126,11 +126,11 @@ diffdope::Pose CalibrationNodelet::initialGuess(const std::string& camera_frame)
   try {
     // No waiting: the listener has run since start, and a timeout in simulated time never ends once the clock
     // stops (a bag that has finished).
-    const geometry_msgs::TransformStamped t = tf_buffer_->lookupTransform(mount_frame_, camera_frame, ros::Time(0));
-    return pose_from_transform(t.transform, "TF " + mount_frame_ + " -> " + camera_frame).inverse();
+    const geometry_msgs::TransformStamped t = tf_buffer_->lookupTransform(mountFrame(), camera_frame, ros::Time(0));
+    return pose_from_transform(t.transform, "TF " + mountFrame() + " -> " + camera_frame).inverse();
   } catch (const tf2::TransformException& e) {
     throw std::runtime_error("no initial guess: set ~initial_guess [x, y, z, qx, qy, qz, qw] (the camera in '" +
-                             mount_frame_ + "') or publish a rough TF " + mount_frame_ + " -> " + camera_frame + " (" +
+                             mountFrame() + "') or publish a rough TF " + mountFrame() + " -> " + camera_frame + " (" +
                              e.what() + ")");
   }
 }
@@ -157,7 +157,7 @@ bool CalibrationNodelet::onCompute(ComputeCalibration::Request&, ComputeCalibrat
   }
   const diffdope::Pose mount_from_camera = r.camera_from_mount.inverse();
   res.transform.header.stamp = ros::Time::now();
-  res.transform.header.frame_id = mount_frame_;
+  res.transform.header.frame_id = mountFrame();
   res.transform.child_frame_id = camera_frame_;
   res.transform.transform = transform_to_msg(mount_from_camera);
   for (const diffdope::CaptureResidual& c : r.captures) {
@@ -191,7 +191,7 @@ bool CalibrationNodelet::onCompute(ComputeCalibration::Request&, ComputeCalibrat
     // break the tree, so the calibration goes to that parent (base -> camera_link), composed with the driver's.
     geometry_msgs::TransformStamped on_tf = res.transform;
     std::string parent;
-    if (tf_buffer_->_getParent(camera_frame_, ros::Time(0), parent) && !parent.empty() && parent != mount_frame_) {
+    if (tf_buffer_->_getParent(camera_frame_, ros::Time(0), parent) && !parent.empty() && parent != mountFrame()) {
       try {
         const geometry_msgs::TransformStamped p = tf_buffer_->lookupTransform(parent, camera_frame_, ros::Time(0));
         const diffdope::Pose parent_from_camera = pose_from_transform(p.transform, "TF " + parent);
@@ -205,7 +205,7 @@ bool CalibrationNodelet::onCompute(ComputeCalibration::Request&, ComputeCalibrat
     }
     if (!on_tf.child_frame_id.empty()) {
       static_tf_->sendTransform(on_tf);
-      res.message += "; published on TF as " + mount_frame_ + " -> " + on_tf.child_frame_id;
+      res.message += "; published on TF as " + mountFrame() + " -> " + on_tf.child_frame_id;
     }
   } else if (publish_tf_) {
     res.message += "; not published on TF";
@@ -226,7 +226,7 @@ bool CalibrationNodelet::onSave(std_srvs::Trigger::Request&, std_srvs::Trigger::
     const std::filesystem::path path(output_file_);
     if (path.has_parent_path()) std::filesystem::create_directories(path.parent_path());
     std::ofstream f(output_file_);
-    f << diffdope::easy_handeye_yaml(mount_from_camera, mount_frame_, camera_frame_, mount_.eye_in_hand());
+    f << diffdope::easy_handeye_yaml(mount_from_camera, mountFrame(), camera_frame_, mount_.eye_in_hand());
     if (!f) throw std::runtime_error("cannot write");
   } catch (const std::exception& e) {
     res.message = output_file_ + ": " + e.what();
