@@ -29,6 +29,20 @@ Vector6d gradient_about(const Vector6d& camera_gradient, const Eigen::Vector3d& 
 /// mesh with area that is not a line.
 Matrix6d surface_displacement_metric(const Mesh& mesh, const Eigen::Matrix3d& R, const Eigen::Vector3d& pivot_model);
 
+/// Poses of a secant probe: ±h along each axis of the whitened twist (the columns of `LinvT` = L⁻ᵀ, G = L Lᵀ the
+/// surface_displacement_metric(): unit RMS surface displacement), in the order +h, −h per axis, then `pose`
+/// itself (kSecantProbePoses in all).
+constexpr int kSecantProbePoses = 13;
+std::vector<Pose> secant_probe_poses(const Pose& pose, const Matrix6d& LinvT, double h, const Eigen::Vector3d& pivot);
+
+/// The whitened secant Hessian (per m² of RMS surface displacement) from the gradients about the pivot at
+/// secant_probe_poses(): central differences, symmetrised.
+Matrix6d secant_hessian(const std::vector<Vector6d>& gradients, const Matrix6d& Linv, double h);
+
+/// The Newton step −H⁻¹ g in whitened coordinates (metres of RMS surface displacement), at most `trust` long.
+/// Curvatures below a thousandth of the largest (a flat direction, or one curved downwards) are raised to it.
+Vector6d newton_step(const Matrix6d& Hq, const Vector6d& gq, double trust);
+
 /// One image of a probed pose. Several views share the pose (a calibration's captures: one camera <- base, the
 /// robot in each capture's configuration); the probe weighs their mean loss, as Refiner::refine_views() does.
 struct ProbeView {

@@ -26,9 +26,9 @@ namespace diffdope {
 /// one refinement can take.
 struct RefinerOptions {
   int batch_size = 32;   // B: parallel runs (paper: 32); [1, kMaxBatchSize]
-  /// Gradient steps per run (paper: 100). 60 with the coarse-to-fine schedule below ends within 0.2 AUC of 100 on
-  /// the dev set at 55 % of the time (docs/benchmarks.md).
-  int iterations = 60;  // [0, kMaxIterations]
+  /// Gradient steps per run (paper: 100). 48 with the coarse-to-fine schedule below and the Newton steps after
+  /// it (newton_rounds) are as accurate as 60 without them on the dev sets, at less time (docs/benchmarks.md).
+  int iterations = 48;  // [0, kMaxIterations]
   /// Learning-rate bounds, dimensionless. A step moves the object's centre by about lr * 2 * diameter * (loss
   /// slope) and turns it by about 4 * lr * (slope) radians: translation gradients are scaled by diameter^2 and
   /// rotation gradients (taken about the object's centre) by 4, so one rate means the same for small and big
@@ -88,6 +88,15 @@ struct RefinerOptions {
   /// iterations 0 (scoring the start).
   int polish_iterations = 30;  // [0, kMaxIterations]
   int polish_runs = 4;         // [1, 16]
+  /// Newton steps: after the polish and the print alignment, each of newton_rounds rounds probes the loss's
+  /// curvature about the result (a secant Hessian from kSecantProbePoses gradients, ±h of surface displacement;
+  /// h one working pixel at the object's distance, halved every round) and tries a quarter, a half and all of
+  /// the Newton step on it (at most 2h). The best is taken when it lowers the loss by more than noise would
+  /// (kNewtonEvidence); otherwise the rounds end. Plain gradient steps are bounded by the stiffest direction (a
+  /// thin object across its width), so softer ones (its roll) are still converging when the iterations end
+  /// (docs/benchmarks.md). 0 = off (the paper's algorithm); never for tracked starts (ObjectTarget::explore
+  /// false) nor with iterations 0 (scoring the start).
+  int newton_rounds = 2;  // [0, 8]
   LossOptions loss;             // term weights (all 1 as in the paper) and robustness constants
   /// A plain model (Mesh::plain(): no print, one colour) gets no colour term: its flat render against a lit image
   /// sees only the lighting (the paper's T-LESS results are better without RGB). true = compare its colour anyway.
@@ -182,6 +191,7 @@ struct RefineResult {
                                       // caller's starts'), start may then index a turned start, time_ms is both
   int iterations = 0;                 // iterations actually run (early stop)
   int polish_iterations = 0;          // iterations of the polish (RefinerOptions::polish_iterations) run
+  int newton_steps = 0;               // Newton steps taken (RefinerOptions::newton_rounds)
   double time_ms = 0;                 // wall time of refine() (refine_all(): from the call's start to this object's end)
   // Quality scores at the refined pose (at the refiner's image scale).
   double mask_iou = -1;               // IoU of rendered and observed masks (with depth, the render less where the

@@ -62,6 +62,37 @@ Matrix6d surface_displacement_metric(const Mesh& mesh, const Eigen::Matrix3d& R,
   return B * Gm * B.transpose();
 }
 
+std::vector<Pose> secant_probe_poses(const Pose& pose, const Matrix6d& LinvT, double h, const Eigen::Vector3d& pivot) {
+  std::vector<Pose> probes;
+  probes.reserve(kSecantProbePoses);
+  for (int i = 0; i < 6; ++i)
+    for (const double s : {h, -h}) probes.push_back(twist_about(pose, s * LinvT.col(i), pivot));
+  probes.push_back(pose);
+  return probes;
+}
+
+Matrix6d secant_hessian(const std::vector<Vector6d>& gradients, const Matrix6d& Linv, double h) {
+  Matrix6d Hq;
+  for (int i = 0; i < 6; ++i)
+    Hq.col(i) = (Linv * gradients[size_t(2 * i)] - Linv * gradients[size_t(2 * i + 1)]) / (2 * h);
+  return 0.5 * (Hq + Hq.transpose());
+}
+
+Vector6d newton_step(const Matrix6d& Hq, const Vector6d& gq, double trust) {
+  // Directions curved less than a thousandth of the most curved one (flat, or downwards: not a minimum) take the
+  // step that curvature would give; the trust radius then bounds the step.
+  const Eigen::SelfAdjointEigenSolver<Matrix6d> eig(Hq);
+  if (eig.info() != Eigen::Success || !gq.allFinite()) return Vector6d::Zero();
+  Vector6d curvature = eig.eigenvalues();
+  const double floor = 1e-3 * std::max(curvature.maxCoeff(), std::numeric_limits<double>::min());
+  for (int i = 0; i < 6; ++i) curvature[i] = std::max(curvature[i], floor);
+  const Matrix6d& U = eig.eigenvectors();
+  Vector6d step = -(U * curvature.cwiseInverse().asDiagonal() * U.transpose()) * gq;
+  const double length = step.norm();
+  if (length > trust) step *= trust / length;
+  return step;
+}
+
 PoseCurvature probe_pose_curvature(Renderer& renderer, const Camera& camera, const Mesh& mesh,
                                    const Observation& observed, const LossOptions& loss, const Pose& pose,
                                    double distance, const std::vector<Vector6d>& free_twists) {
@@ -85,11 +116,7 @@ PoseCurvature probe_pose_curvature(Renderer& renderer, const std::vector<ProbeVi
   const Matrix6d LinvT = Linv.transpose();
   const double h = 0.5 * distance;
 
-  std::vector<Pose> probes;
-  probes.reserve(13);
-  for (int i = 0; i < 6; ++i)
-    for (const double s : {h, -h}) probes.push_back(twist_about(pose, s * LinvT.col(i), pivot));
-  probes.push_back(pose);
+  const std::vector<Pose> probes = secant_probe_poses(pose, LinvT, h, pivot);
   // The views' mean loss and gradient (about the pivot) at each probe.
   std::vector<double> totals(probes.size(), 0.0);
   std::vector<Vector6d> gradients(probes.size(), Vector6d::Zero());
@@ -105,10 +132,7 @@ PoseCurvature probe_pose_curvature(Renderer& renderer, const std::vector<ProbeVi
   out.loss = totals[12];
   for (const double t : totals)
     if (!std::isfinite(t)) return out;
-  Matrix6d Hq;
-  for (int i = 0; i < 6; ++i)
-    Hq.col(i) = (Linv * gradients[size_t(2 * i)] - Linv * gradients[size_t(2 * i + 1)]) / (2 * h);
-  Hq = 0.5 * (Hq + Hq.transpose()).eval();
+  const Matrix6d Hq = secant_hessian(gradients, Linv, h);
   out.hessian = L * Hq * L.transpose();
 
   // The directions a declared symmetry leaves free are not weaknesses of the data: search their complement.

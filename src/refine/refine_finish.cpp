@@ -1,11 +1,13 @@
 // RefineRun::finish() (refine_run.hpp): the choice between the start's basin and the shape scan's candidate, the
 // polish, the print alignment, and the result's scores and verdict.
+#include <Eigen/Cholesky>
 #include <Eigen/Geometry>
 #include <algorithm>
 #include <cmath>
 #include <limits>
 #include <opencv2/imgproc.hpp>
 
+#include "diffdope/pose_curvature.hpp"
 #include "diffdope/print_alignment.hpp"
 #include "refine/refine_run.hpp"
 #include "refine/refine_schedule.hpp"
@@ -79,6 +81,46 @@ void RefineRun::polish(Renderer& renderer, RefineResult& res) {
   }
 }
 
+void RefineRun::newton(Renderer& renderer, RefineResult& res) {
+  if (newton_rounds_ <= 0 || options_.iterations == 0 || !std::isfinite(res.loss.total)) return;
+  Matrix6d metric = Matrix6d::Zero();
+  for (const Mesh* mesh : meshes_) metric += surface_displacement_metric(*mesh, res.pose.R, pivot_model_);
+  const Eigen::LLT<Matrix6d> llt(metric / double(meshes_.size()));
+  if (llt.info() != Eigen::Success) return;
+  const Matrix6d L = llt.matrixL(), Linv = L.inverse(), LinvT = Linv.transpose();
+  // The noise model's residual count: the object's pixels at the result, in every view.
+  double pixels = 0;
+  for (size_t v = 0; v < meshes_.size(); ++v)
+    pixels += cv::countNonZero(renderer.render(fine_[v].cam, *meshes_[v], {res.pose}, fine_[v].obs.mask)[0].coverage >= 0.5f);
+  const double residuals = std::max(1.0, pixels / kCorrelatedPixels);
+  // The first probe reaches one working pixel at the object's distance: the scale below which the plain steps'
+  // hopping and the antialiased silhouette blur the loss.
+  const Camera& cam = fine_[0].cam;
+  double h = (res.pose * pivot_model_).z() / std::max(cam.fx, cam.fy);
+  std::vector<LossValue> v, tried;
+  std::vector<Vector6d> gradients(kSecantProbePoses);
+  for (int round = 0; round < newton_rounds_ && h > 0; ++round, h *= 0.5) {
+    const Eigen::Vector3d pivot = res.pose * pivot_model_;
+    evaluate(renderer, secant_probe_poses(res.pose, LinvT, h, pivot), loss_, true, v, true);
+    for (int k = 0; k < kSecantProbePoses; ++k) {
+      if (!std::isfinite(v[size_t(k)].total)) return;  // a probe left the image
+      gradients[size_t(k)] = gradient_about(v[size_t(k)].gradient, pivot);
+    }
+    const Vector6d step = newton_step(secant_hessian(gradients, Linv, h), Linv * gradients.back(), 2 * h);
+    std::vector<Pose> poses;
+    for (const double share : {0.25, 0.5, 1.0}) poses.push_back(twist_about(res.pose, share * (LinvT * step), pivot));
+    evaluate(renderer, poses, loss_, false, tried, true);
+    size_t best = 0;
+    for (size_t j = 1; j < poses.size(); ++j)
+      if (tried[j].total < tried[best].total) best = j;
+    const double gain = residuals * (res.loss.total - tried[best].total) / std::max(res.loss.total, 1e-12);
+    if (!(gain > kNewtonEvidence)) return;
+    res.pose = poses[best];
+    res.loss = tried[best];
+    ++res.newton_steps;
+  }
+}
+
 int RefineRun::lowest(const RefineResult& res, int first, int last) const {
   int best = -1;
   for (int i = first; i < last; ++i)
@@ -114,6 +156,7 @@ RefineResult RefineRun::finish(Renderer& renderer) {
   polish(renderer, res);
   if (!(res.pose.R == before_polish.R && res.pose.t == before_polish.t)) print.known = false;  // measured elsewhere
   align_result_print(renderer, res, print);
+  newton(renderer, res);
   // Of the poses a declared symmetry makes equivalent, the one nearest the start: a track does not spin.
   if (meshes_.size() == 1) res.pose = meshes_.front()->symmetry.nearest_equivalent(res.pose, res.initial_pose.R);
   const int rendered_pixels = score_views(renderer, res);

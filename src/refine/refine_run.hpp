@@ -45,6 +45,11 @@ class RefineRun {
   /// iterations: a result that was already converged (an easy start) costs a few evaluations, not all.
   static constexpr int kPolishPatience = 5;
   static constexpr double kPolishTolerance = 1e-4;
+  /// A Newton step (RefinerOptions::newton_rounds) is taken when it raises the log-likelihood of the loss's noise
+  /// model (pose_covariance(): N = rendered pixels / kCorrelatedPixels Laplace residuals, N·ΔL / L) by more than
+  /// this many nats: half the pose's six degrees of freedom, what fitting them to noise alone gains on average.
+  /// A move within the loss's noise keeps the pose the descent left, the one nearer the start.
+  static constexpr double kNewtonEvidence = 3.0;
 
   /// Validates the input and prepares the scaled images, the loss and the learning rates. Throws
   /// std::invalid_argument on unusable input (as Refiner::refine()). `views`: one for an object; several share
@@ -85,6 +90,8 @@ class RefineRun {
   RefineResult finish(Renderer& renderer);
   /// Iterations of the last descent from the chosen pose (RefinerOptions::polish_iterations; 0: none).
   void set_polish(int iterations) { polish_iterations_ = iterations; }
+  /// Rounds of Newton steps after the print alignment (RefinerOptions::newton_rounds; 0: none).
+  void set_newton(int rounds) { newton_rounds_ = rounds; }
   /// How the print of a render registers with the image (one view with rgb; else not measured).
   PrintRegistration register_render(const RenderImage& img) const;
   /// PrintRegistration::significance() at `pose` (one render at the fine scale); NaN when not measurable (no
@@ -134,8 +141,11 @@ class RefineRun {
   std::vector<ShapeRotation> print_axes_;
   double print_range_ = 0;
   int polish_iterations_ = 0;
+  int newton_rounds_ = 0;
   /// The last descent (RefinerOptions::polish_iterations) from res.pose, keeping the lowest loss seen.
   void polish(Renderer& renderer, RefineResult& res);
+  /// The Newton steps (RefinerOptions::newton_rounds) from res.pose, each taken on kNewtonEvidence.
+  void newton(Renderer& renderer, RefineResult& res);
   // finish()'s steps.
   /// The run of lowest loss among runs [first, last) (-1: none).
   int lowest(const RefineResult& res, int first, int last) const;

@@ -134,6 +134,7 @@ RefineResult Refiner::refine_once(const RefinerOptions& o, const Camera& camera,
   RefineRun run(o, camera, observed, mesh, initials, shape_turns(o, mesh, true));
   run.set_print_axes(print_axes(o, mesh), o.print_search);
   run.set_polish(o.polish_iterations);
+  run.set_newton(o.newton_rounds);
   return drive(run);
 }
 
@@ -168,6 +169,7 @@ RefineResult Refiner::refine_views(const std::vector<RefineView>& views, const s
     if (!pivot_model.allFinite()) throw std::invalid_argument("refine_views: the pivot is not finite");
     RefineRun run(o, views, initials, {}, nullptr, nullptr, &pivot_model);
     run.set_polish(o.polish_iterations);
+    run.set_newton(o.newton_rounds);
     return drive(run);
   } catch (const std::exception& e) {
     return failed_result(initials.empty() ? Pose() : initials.front(), e.what());
@@ -296,6 +298,7 @@ std::vector<RefineResult> Refiner::refine_all_once(const RefinerOptions& options
       runs[k]->set_print_axes(print_axes(options, *t.mesh), t.explore ? options.print_search
                                                                       : std::min(options.print_search, kTrackedPrintSearch));
       runs[k]->set_polish(t.explore ? options.polish_iterations : 0);
+      runs[k]->set_newton(t.explore ? options.newton_rounds : 0);
     } catch (const std::exception& e) {
       fail(k, e.what());
     }
@@ -374,12 +377,13 @@ long planned_evaluations(const RefinerOptions& o) {
     total += active + candidates;
   }
   // finish(): the initial loss at the fine scale, a candidate's print registration (two renders), the polish,
-  // the print alignment (one axis, and the loss and registration at its turn), the scoring render and the
-  // curvature probe.
+  // the print alignment (one axis, and the loss and registration at its turn), the Newton steps (a render for
+  // the pixel count, then per round a probe and three tries), the scoring render and the curvature probe.
   const long candidate = scan_at >= 0 && scan_at < o.iterations ? 2 : 0;
   const long print = o.explore_tolerance > 0 ? print_alignment_evaluations(o.print_search) + 2 : 0;
   const long polish = o.polish_iterations > 0 && o.iterations > 0 ? 1 + long(o.polish_runs) * o.polish_iterations : 0;
-  return total + 2 + candidate + print + polish + (o.probe_distance > 0 ? kCurvatureProbeEvaluations : 0);
+  const long newton = o.newton_rounds > 0 && o.iterations > 0 ? 1 + long(o.newton_rounds) * (kSecantProbePoses + 3) : 0;
+  return total + 2 + candidate + print + polish + newton + (o.probe_distance > 0 ? kCurvatureProbeEvaluations : 0);
 }
 
 }  // namespace diffdope

@@ -5,6 +5,7 @@
 #include <cmath>
 #include <limits>
 
+#include "diffdope/pose_curvature.hpp"
 #include "diffdope/refine_time.hpp"
 
 using namespace diffdope;
@@ -17,6 +18,7 @@ TEST(PlannedEvaluations, RunsTimesIterationsLessWhatHalvingDrops) {
   o.successive_halving = false;
   o.probe_distance = 0;  // no curvature probe
   o.polish_iterations = 0;
+  o.newton_rounds = 0;
   EXPECT_EQ(planned_evaluations(o), 16 * 101 + 2);
   o.successive_halving = true;  // 25 iterations each at 16, 8, 4, 2 runs, then the last evaluation at 2
   EXPECT_EQ(planned_evaluations(o), 16 * 25 + 8 * 25 + 4 * 25 + 2 * 25 + 2 + 2);
@@ -24,6 +26,13 @@ TEST(PlannedEvaluations, RunsTimesIterationsLessWhatHalvingDrops) {
   EXPECT_EQ(planned_evaluations(o), 16 + 2);
   o.probe_distance = 0.01;
   EXPECT_EQ(planned_evaluations(o), 16 + 2 + kCurvatureProbeEvaluations);
+  // Newton steps: none when scoring the start; otherwise a render for the pixel count, then per round a probe
+  // and three tries (at most: the rounds end at a step that is not clearly better).
+  o.newton_rounds = 2;
+  EXPECT_EQ(planned_evaluations(o), 16 + 2 + kCurvatureProbeEvaluations);
+  o.iterations = 100;
+  o.probe_distance = 0;
+  EXPECT_EQ(planned_evaluations(o), 16 * 25 + 8 * 25 + 4 * 25 + 2 * 25 + 2 + 2 + 1 + 2 * (kSecantProbePoses + 3));
 }
 
 TEST(RefineTimeEstimator, UsesThePriorUntilARefinementWasTimed) {

@@ -117,7 +117,8 @@ TEST(Refiner, SuccessiveHalvingDropsTheWorseHalfThreeTimes) {
   o.iterations = 20;
   o.coarse_fraction = 0;
   o.explore_tolerance = 0;  // (the L-block has no shape turns anyway; planned_evaluations would count them)
-  o.polish_iterations = 0;  // (run_histories do not hold the polish's; counted below)
+  o.polish_iterations = 0;  // (run_histories do not hold the polish's nor the Newton steps'; counted below)
+  o.newton_rounds = 0;
   const RefineResult r = Refiner(o).refine(s.cam, s.obs, s.mesh, init);
   std::map<size_t, int> runs_by_length;
   for (const auto& h : r.run_histories) ++runs_by_length[h.size()];

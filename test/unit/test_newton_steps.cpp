@@ -1,0 +1,95 @@
+// The Newton steps after the descent (RefinerOptions::newton_rounds): where plain steps stop short (a thin
+// object's roll, bounded by the rate its width allows), and what they leave alone.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <random>
+
+#include "diffdope/metrics.hpp"
+#include "diffdope/pose_curvature.hpp"
+#include "diffdope/primitives.hpp"
+#include "diffdope/procedural.hpp"
+#include "diffdope/refiner.hpp"
+#include "diffdope/synthetic.hpp"
+
+using namespace diffdope;
+
+namespace {
+
+/// A thin printed bar (20 x 3 x 2 cm) 60 cm from a 640 x 480 camera: its roll about its length moves the surface
+/// a tenth as far as a turn across it does.
+struct BarScene {
+  Camera cam{600, 600, 319.5, 239.5, 640, 480};
+  Mesh mesh = make_box(Eigen::Vector3d(0.20, 0.03, 0.02), make_label_texture(256, 5));
+  Pose truth;
+  Observation obs;
+  explicit BarScene(const SyntheticNoise& noise) {
+    Vector6d d;
+    d << 0, 0, 0, 0.5, -0.3, 0.9;
+    truth = Pose(se3_exp(d).R, Eigen::Vector3d(0.02, 0.01, 0.6));
+    obs = synthesize_observation(*make_cpu_renderer(), cam, mesh, truth, noise, 3);
+  }
+};
+
+RefineResult refine_with(const BarScene& s, const Pose& init, int newton_rounds) {
+  RefinerOptions o;
+  o.newton_rounds = newton_rounds;
+  return Refiner(o).refine(s.cam, s.obs, s.mesh, init);
+}
+
+}  // namespace
+
+TEST(NewtonSteps, ConvergeAThinObjectWherePlainStepsStopShort) {
+  const BarScene s{SyntheticNoise()};
+  const auto points = metric_points(s.mesh);
+  double without = 0, with = 0;
+  for (uint32_t seed = 1; seed <= 4; ++seed) {
+    std::mt19937_64 rng(seed);
+    const Pose init = perturb_pose(s.truth, s.mesh.center(), 10 * M_PI / 180, 0.01, rng);  // a medium start
+    const RefineResult plain = refine_with(s, init, 0), newton = refine_with(s, init, 2);
+    EXPECT_EQ(plain.newton_steps, 0);
+    EXPECT_GE(newton.newton_steps, 1) << "seed " << seed;
+    EXPECT_LE(newton.loss.total, plain.loss.total) << "seed " << seed;
+    EXPECT_LT(1e3 * add_error(points, newton.pose, s.truth), 0.15) << "seed " << seed;
+    without += 1e3 * add_error(points, plain.pose, s.truth) / 4;
+    with += 1e3 * add_error(points, newton.pose, s.truth) / 4;
+  }
+  EXPECT_GT(without, 2 * with) << "mean ADD without " << without << " mm, with " << with << " mm";
+}
+
+TEST(NewtonSteps, LeaveAPoseTheLossCannotImproveAsItWas) {
+  // A noiseless image and the truth as the start: no step lowers the loss by more than noise would, so the
+  // result is exactly what the refinement gives without them.
+  SyntheticNoise none;
+  none.rgb_sigma = 0, none.depth_sigma_at_1m = 0, none.hole_fraction = 0;
+  const BarScene s{none};
+  const RefineResult plain = refine_with(s, s.truth, 0), newton = refine_with(s, s.truth, 2);
+  EXPECT_EQ(newton.newton_steps, 0);
+  EXPECT_EQ(newton.pose.t, plain.pose.t);
+  EXPECT_EQ(newton.pose.R, plain.pose.R);
+  EXPECT_EQ(newton.loss.total, plain.loss.total);
+}
+
+TEST(NewtonStep, SolvesAQuadraticModelWithinItsTrustRadius) {
+  Vector6d curvatures;
+  curvatures << 4, 1, 0.25, 9, 2, 0.5;
+  const Matrix6d U = Eigen::HouseholderQR<Matrix6d>(Matrix6d::Random()).householderQ();
+  const Matrix6d H = U * curvatures.asDiagonal() * U.transpose();
+  Vector6d g;
+  g << 0.3, -0.2, 0.1, 0.05, -0.4, 0.2;
+  const Vector6d exact = -H.ldlt().solve(g);
+  EXPECT_LT((newton_step(H, g, 1e3) - exact).norm(), 1e-9 * exact.norm());
+  // Clipped to the trust radius, along the same direction.
+  const Vector6d clipped = newton_step(H, g, 0.1 * exact.norm());
+  EXPECT_NEAR(clipped.norm(), 0.1 * exact.norm(), 1e-12);
+  EXPECT_GT(clipped.normalized().dot(exact.normalized()), 1 - 1e-9);
+  // A direction curved downwards is not followed uphill: its curvature is raised to a thousandth of the largest,
+  // so the step still lowers the quadratic model there.
+  curvatures[2] = -1;
+  const Matrix6d saddle = U * curvatures.asDiagonal() * U.transpose();
+  const Vector6d step = newton_step(saddle, g, 1e3);
+  const double along = U.col(2).dot(step), slope = U.col(2).dot(g);
+  EXPECT_LT(along * slope, 0);
+  EXPECT_NEAR(along, -slope / (1e-3 * 9), 1e-9 * std::abs(along));
+  EXPECT_EQ(newton_step(H, Vector6d::Constant(std::nan("")), 1.0), Vector6d::Zero());
+}
