@@ -275,6 +275,8 @@ int main(int argc, char** argv) {
           line["scan_taken"] = r.scan_taken;
           line["print_turn_deg"] = r.print_turn * 180.0 / M_PI;
           line["retried"] = r.retried;
+          line["polish_iterations"] = r.polish_iterations;
+          line["newton_steps"] = r.newton_steps;
           line["print"] = {{"ncc", r.print.ncc}, {"best_ncc", r.print.best_ncc}, {"best_dx", r.print.best_dx},
                            {"best_dy", r.print.best_dy}, {"far_mean", r.print.far_mean}, {"far_std", r.print.far_std},
                            {"pixels", r.print.pixels}, {"render_contrast", r.print.render_contrast}};
