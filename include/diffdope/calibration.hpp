@@ -49,7 +49,7 @@ struct CalibrationOptions {
   /// (CalibrationResult::position_std); the confidence is 0.5 there. (0, 1].
   double max_position_std = 0.002;
   /// The refiner's defaults for a robot: no colour term (URDF meshes seldom carry the robot's real colours), no
-  /// shape scan (it is for objects); 200 iterations; learning rates in [0.0002, 0.006]:
+  /// shape scan (it is for objects); 200 iterations and no Newton steps (the later passes converge); learning rates in [0.0002, 0.006]:
   /// a robot's links are thin for its size, so the mask term's slope per metre is that of a link's width, not
   /// of the robot's diameter, and the objects' rates overshoot (measured: docs/calibration.md).
   static RefinerOptions default_refiner();

@@ -39,9 +39,11 @@ std::vector<Pose> secant_probe_poses(const Pose& pose, const Matrix6d& LinvT, do
 /// secant_probe_poses(): central differences, symmetrised.
 Matrix6d secant_hessian(const std::vector<Vector6d>& gradients, const Matrix6d& Linv, double h);
 
-/// The Newton step −H⁻¹ g in whitened coordinates (metres of RMS surface displacement), at most `trust` long.
-/// Curvatures below a thousandth of the largest (a flat direction, or one curved downwards) are raised to it.
-Vector6d newton_step(const Matrix6d& Hq, const Vector6d& gq, double trust);
+/// The Newton step −H⁻¹ g in whitened coordinates (metres of RMS surface displacement), less its components
+/// along `free` (whitened directions a declared symmetry leaves free), at most `trust` long. Curvatures below a
+/// thousandth of the largest (a flat direction, or one curved downwards) are raised to it; zero when no
+/// direction curves upwards or the input is not finite.
+Vector6d newton_step(const Matrix6d& Hq, const Vector6d& gq, double trust, const std::vector<Vector6d>& free = {});
 
 /// One image of a probed pose. Several views share the pose (a calibration's captures: one camera <- base, the
 /// robot in each capture's configuration); the probe weighs their mean loss, as Refiner::refine_views() does.

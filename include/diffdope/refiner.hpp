@@ -27,7 +27,7 @@ namespace diffdope {
 struct RefinerOptions {
   int batch_size = 32;   // B: parallel runs (paper: 32); [1, kMaxBatchSize]
   /// Gradient steps per run (paper: 100). 48 with the coarse-to-fine schedule below and the Newton steps after
-  /// it (newton_rounds) are as accurate as 60 without them on the dev sets, at less time (docs/benchmarks.md).
+  /// it (newton_rounds) end within 0.03 AUC of 60 on the dev sets at 80 % of the time (docs/benchmarks.md).
   int iterations = 48;  // [0, kMaxIterations]
   /// Learning-rate bounds, dimensionless. A step moves the object's centre by about lr * 2 * diameter * (loss
   /// slope) and turns it by about 4 * lr * (slope) radians: translation gradients are scaled by diameter^2 and
@@ -92,10 +92,10 @@ struct RefinerOptions {
   /// curvature about the result (a secant Hessian from kSecantProbePoses gradients, ±h of surface displacement;
   /// h one working pixel at the object's distance, halved every round) and tries a quarter, a half and all of
   /// the Newton step on it (at most 2h). The best is taken when it lowers the loss by more than noise would
-  /// (kNewtonEvidence); otherwise the rounds end. Plain gradient steps are bounded by the stiffest direction (a
+  /// (3 nats of the covariance's noise model, pose_covariance()); otherwise the rounds end. Plain gradient steps are bounded by the stiffest direction (a
   /// thin object across its width), so softer ones (its roll) are still converging when the iterations end
-  /// (docs/benchmarks.md). 0 = off (the paper's algorithm); never for tracked starts (ObjectTarget::explore
-  /// false) nor with iterations 0 (scoring the start).
+  /// (docs/benchmarks.md). 0 = off (the paper's algorithm, and the calibration's default); never for tracked
+  /// starts (ObjectTarget::explore false) nor with iterations 0 (scoring the start).
   int newton_rounds = 2;  // [0, 8]
   LossOptions loss;             // term weights (all 1 as in the paper) and robustness constants
   /// A plain model (Mesh::plain(): no print, one colour) gets no colour term: its flat render against a lit image
@@ -162,7 +162,7 @@ struct RefineResult {
   Pose pose;                          // refined model pose in the camera frame (metres)
   Pose initial_pose;                  // the initial pose the winning run started from
   LossValue loss;                     // the result's loss, per term (unweighted means) and total: the winner's
-                                      // best, or lower after the polish
+                                      // best, or lower after the polish and the Newton steps
   /// The loss as used: RefinerOptions::loss with the refiner's own choices, a term without its observation at
   /// weight 0 (no mask: weight_mask; no depth: weight_depth; no rgb: weight_rgb and weight_edges) and a plain
   /// model's colour term off (RefinerOptions::plain_model_rgb).
@@ -231,8 +231,9 @@ struct ObjectTarget {
   Pose initial;
   cv::Mat mask;  // this object's visible mask (CV_32FC1, or any type to_mask_float takes); may be empty
   std::vector<Pose> alternatives;  // further initial poses; the runs are shared out among all of them
-  /// false (a tracked start, explores() in object_track.hpp): no shape scan (explore_tolerance) nor retry
-  /// (retry_turn), and the print alignment searches only +-kTrackedPrintSearch (print_alignment.hpp).
+  /// false (a tracked start, explores() in object_track.hpp): no shape scan (explore_tolerance), retry
+  /// (retry_turn), polish nor Newton steps, and the print alignment searches only +-kTrackedPrintSearch
+  /// (print_alignment.hpp).
   bool explore = true;
 };
 
@@ -344,8 +345,8 @@ class Refiner {
 /// Hypothesis evaluations (one render + loss + gradient of one pose) that refining one object with `o` costs at
 /// most: the runs of every iteration, less those successive halving drops, the shape scan as for a shape with
 /// the most turns (kMaxShapeTurns; an asymmetric one has none) and its candidate run, the polish, the print
-/// alignment and the final scoring. An early stop (of the descent or the polish) only
-/// lowers it; a retry of a rejected result (retry_turn) doubles it for that object. The unit of
+/// alignment, the Newton steps and the final scoring. An early stop (of the descent, the polish or the Newton
+/// rounds) only lowers it; a retry of a rejected result (retry_turn) doubles it for that object. The unit of
 /// RefineTimeEstimator (refine_time.hpp).
 long planned_evaluations(const RefinerOptions& o);
 

@@ -22,7 +22,7 @@ RefinerOptions CalibrationOptions::default_refiner() {
   o.loss.weight_rgb = 0;
   o.explore_tolerance = 0;
   o.iterations = 200;
-  o.newton_rounds = 0;  // the 200 iterations and the later passes' small rates converge (docs/calibration.md)
+  o.newton_rounds = 0;  // the 200 iterations and the later passes' small rates converge
   o.lr_low = 0.0002;
   o.lr_high = 0.006;
   return o;

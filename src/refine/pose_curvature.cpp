@@ -78,17 +78,25 @@ Matrix6d secant_hessian(const std::vector<Vector6d>& gradients, const Matrix6d& 
   return 0.5 * (Hq + Hq.transpose());
 }
 
-Vector6d newton_step(const Matrix6d& Hq, const Vector6d& gq, double trust) {
+Vector6d newton_step(const Matrix6d& Hq, const Vector6d& gq, double trust, const std::vector<Vector6d>& free) {
   // Directions curved less than a thousandth of the most curved one (flat, or downwards: not a minimum) take the
   // step that curvature would give; the trust radius then bounds the step.
   const Eigen::SelfAdjointEigenSolver<Matrix6d> eig(Hq);
-  if (eig.info() != Eigen::Success || !gq.allFinite()) return Vector6d::Zero();
+  if (eig.info() != Eigen::Success || !gq.allFinite() || !(eig.eigenvalues().maxCoeff() > 0)) return Vector6d::Zero();
   Vector6d curvature = eig.eigenvalues();
-  const double floor = 1e-3 * std::max(curvature.maxCoeff(), std::numeric_limits<double>::min());
+  const double floor = 1e-3 * curvature.maxCoeff();
   for (int i = 0; i < 6; ++i) curvature[i] = std::max(curvature[i], floor);
   const Matrix6d& U = eig.eigenvectors();
   Vector6d step = -(U * curvature.cwiseInverse().asDiagonal() * U.transpose()) * gq;
+  if (!free.empty()) {  // a declared symmetry's free directions: nothing to gain, only trust radius to waste
+    Eigen::Matrix<double, 6, Eigen::Dynamic> F(6, int(free.size()));
+    for (size_t k = 0; k < free.size(); ++k) F.col(int(k)) = free[k];
+    const Eigen::ColPivHouseholderQR<Eigen::Matrix<double, 6, Eigen::Dynamic>> qr(F);
+    const Eigen::MatrixXd Q = Eigen::MatrixXd(qr.householderQ()).leftCols(qr.rank());
+    step -= Q * (Q.transpose() * step);
+  }
   const double length = step.norm();
+  if (!std::isfinite(length)) return Vector6d::Zero();
   if (length > trust) step *= trust / length;
   return step;
 }

@@ -1,5 +1,5 @@
 // RefineRun::finish() (refine_run.hpp): the choice between the start's basin and the shape scan's candidate, the
-// polish, the print alignment, and the result's scores and verdict.
+// polish, the print alignment, the Newton steps, and the result's scores and verdict.
 #include <Eigen/Cholesky>
 #include <Eigen/Geometry>
 #include <algorithm>
@@ -88,15 +88,22 @@ void RefineRun::newton(Renderer& renderer, RefineResult& res) {
   const Eigen::LLT<Matrix6d> llt(metric / double(meshes_.size()));
   if (llt.info() != Eigen::Success) return;
   const Matrix6d L = llt.matrixL(), Linv = L.inverse(), LinvT = Linv.transpose();
-  // The noise model's residual count: the object's pixels at the result, in every view.
+  // The noise model's residual count: the pixels the loss compares at the result (the observed mask, or without
+  // one the window about the start, and the render), in every view.
   double pixels = 0;
-  for (size_t v = 0; v < meshes_.size(); ++v)
-    pixels += cv::countNonZero(renderer.render(fine_[v].cam, *meshes_[v], {res.pose}, fine_[v].obs.mask)[0].coverage >= 0.5f);
+  for (size_t v = 0; v < meshes_.size(); ++v) {
+    const cv::Mat& mask = fine_[v].obs.mask;
+    const RenderImage img = renderer.render(fine_[v].cam, *meshes_[v], {res.pose}, mask)[0];
+    pixels += cv::countNonZero((mask >= 0.5f) | (img.coverage >= 0.5f));
+  }
   const double residuals = std::max(1.0, pixels / kCorrelatedPixels);
   // The first probe reaches one working pixel at the object's distance: the scale below which the plain steps'
   // hopping and the antialiased silhouette blur the loss.
   const Camera& cam = fine_[0].cam;
   double h = (res.pose * pivot_model_).z() / std::max(cam.fx, cam.fy);
+  std::vector<Vector6d> free;  // a declared symmetry's free twists, whitened (as the curvature probe leaves out)
+  if (meshes_.size() == 1)
+    for (const Vector6d& f : meshes_[0]->symmetry.free_twists(res.pose, res.pose * pivot_model_)) free.push_back(L.transpose() * f);
   std::vector<LossValue> v, tried;
   std::vector<Vector6d> gradients(kSecantProbePoses);
   for (int round = 0; round < newton_rounds_ && h > 0; ++round, h *= 0.5) {
@@ -106,13 +113,14 @@ void RefineRun::newton(Renderer& renderer, RefineResult& res) {
       if (!std::isfinite(v[size_t(k)].total)) return;  // a probe left the image
       gradients[size_t(k)] = gradient_about(v[size_t(k)].gradient, pivot);
     }
-    const Vector6d step = newton_step(secant_hessian(gradients, Linv, h), Linv * gradients.back(), 2 * h);
+    const Vector6d step = newton_step(secant_hessian(gradients, Linv, h), Linv * gradients.back(), 2 * h, free);
+    if (step.isZero()) return;
     std::vector<Pose> poses;
     for (const double share : {0.25, 0.5, 1.0}) poses.push_back(twist_about(res.pose, share * (LinvT * step), pivot));
     evaluate(renderer, poses, loss_, false, tried, true);
     size_t best = 0;
     for (size_t j = 1; j < poses.size(); ++j)
-      if (tried[j].total < tried[best].total) best = j;
+      if (std::isfinite(tried[j].total) && !(tried[best].total <= tried[j].total)) best = j;  // (never a non-finite one)
     const double gain = residuals * (res.loss.total - tried[best].total) / std::max(res.loss.total, 1e-12);
     if (!(gain > kNewtonEvidence)) return;
     res.pose = poses[best];

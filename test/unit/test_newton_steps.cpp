@@ -2,10 +2,12 @@
 // object's roll, bounded by the rate its width allows), and what they leave alone.
 #include <gtest/gtest.h>
 
+#include <Eigen/Cholesky>
 #include <cmath>
 #include <random>
 
 #include "diffdope/metrics.hpp"
+#include "diffdope/object_track.hpp"
 #include "diffdope/pose_curvature.hpp"
 #include "diffdope/primitives.hpp"
 #include "diffdope/procedural.hpp"
@@ -92,4 +94,53 @@ TEST(NewtonStep, SolvesAQuadraticModelWithinItsTrustRadius) {
   EXPECT_LT(along * slope, 0);
   EXPECT_NEAR(along, -slope / (1e-3 * 9), 1e-9 * std::abs(along));
   EXPECT_EQ(newton_step(H, Vector6d::Constant(std::nan("")), 1.0), Vector6d::Zero());
+  // Nowhere curved upwards: no step (not a floor of nothing, which would be infinite).
+  EXPECT_EQ(newton_step(-H, g, 1.0), Vector6d::Zero());
+  EXPECT_EQ(newton_step(Matrix6d::Zero(), g, 1.0), Vector6d::Zero());
+  // A declared symmetry's free direction gets no part of the step.
+  const Vector6d free_step = newton_step(H, g, 1e3, {U.col(0), U.col(3)});
+  EXPECT_NEAR(U.col(0).dot(free_step), 0, 1e-12);
+  EXPECT_NEAR(U.col(3).dot(free_step), 0, 1e-12);
+  EXPECT_NEAR(U.col(1).dot(free_step), U.col(1).dot(exact), 1e-9);
+}
+
+TEST(SecantHessian, RecoversAQuadraticLossInWhitenedUnits) {
+  // Gradients of the quadratic loss ½ δᵀ H δ at the probe's twists are H δ: the whitened Hessian is L⁻¹ H L⁻ᵀ.
+  const Matrix6d A = Matrix6d::Random(), H = A * A.transpose() + Matrix6d::Identity();
+  const Matrix6d B = Matrix6d::Random(), G = B * B.transpose() + 0.5 * Matrix6d::Identity();
+  const Eigen::LLT<Matrix6d> llt(G);
+  const Matrix6d L = llt.matrixL(), Linv = L.inverse(), LinvT = Linv.transpose();
+  const double h = 0.003;
+  std::vector<Vector6d> gradients;
+  for (int i = 0; i < 6; ++i)
+    for (const double s : {h, -h}) gradients.push_back(H * (s * LinvT.col(i)));
+  gradients.push_back(Vector6d::Zero());
+  EXPECT_LT((secant_hessian(gradients, Linv, h) - Linv * H * LinvT).norm(), 1e-9 * H.norm());
+  // The probe's poses lie along those twists, the pose itself last.
+  const Pose pose(Eigen::Matrix3d::Identity(), Eigen::Vector3d(0.1, 0, 0.6));
+  const std::vector<Pose> probes = secant_probe_poses(pose, LinvT, h, pose.t);
+  ASSERT_EQ(probes.size(), size_t(kSecantProbePoses));
+  EXPECT_EQ(probes.back().t, pose.t);
+  EXPECT_LT((probes[0].t - pose.t - h * LinvT.col(0).head<3>()).norm(), 1e-12);
+}
+
+TEST(NewtonSteps, NotForTrackedStarts) {
+  // A tracked start (refine_all with explore false) is neither polished nor given Newton steps, and the tracking
+  // budget does not count them; the same starts as detections get them.
+  const BarScene s{SyntheticNoise()};
+  Refiner refiner{RefinerOptions()};
+  int detected = 0, tracked = 0;
+  for (uint32_t seed = 1; seed <= 4; ++seed) {
+    std::mt19937_64 rng(seed);
+    ObjectTarget target;  // without a mask: the loss compares a window about the start
+    target.mesh = &s.mesh;
+    target.initial = perturb_pose(s.truth, s.mesh.center(), 10 * M_PI / 180, 0.01, rng);
+    target.explore = true;
+    detected += refiner.refine_all(s.cam, s.obs, {target}).front().newton_steps;
+    target.explore = false;
+    tracked += refiner.refine_all(s.cam, s.obs, {target}).front().newton_steps;
+  }
+  EXPECT_GE(detected, 2);
+  EXPECT_EQ(tracked, 0);
+  EXPECT_EQ(tracked_options(RefinerOptions(), TrackOptions()).newton_rounds, 0);
 }
