@@ -39,6 +39,9 @@ std::vector<Pose> secant_probe_poses(const Pose& pose, const Matrix6d& LinvT, do
 /// secant_probe_poses(): central differences, symmetrised.
 Matrix6d secant_hessian(const std::vector<Vector6d>& gradients, const Matrix6d& Linv, double h);
 
+/// An orthonormal basis of the complement of the span of `directions` (6 × (6 − rank); the identity for none).
+Eigen::Matrix<double, 6, Eigen::Dynamic> complement_of(const std::vector<Vector6d>& directions);
+
 /// The Newton step −H⁻¹ g in whitened coordinates (metres of RMS surface displacement), less its components
 /// along `free` (whitened directions a declared symmetry leaves free), at most `trust` long. Curvatures below a
 /// thousandth of the largest (a flat direction, or one curved downwards) are raised to it; zero when no

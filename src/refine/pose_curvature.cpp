@@ -78,6 +78,15 @@ Matrix6d secant_hessian(const std::vector<Vector6d>& gradients, const Matrix6d& 
   return 0.5 * (Hq + Hq.transpose());
 }
 
+Eigen::Matrix<double, 6, Eigen::Dynamic> complement_of(const std::vector<Vector6d>& directions) {
+  if (directions.empty()) return Matrix6d::Identity();
+  Eigen::Matrix<double, 6, Eigen::Dynamic> F(6, int(directions.size()));
+  for (size_t k = 0; k < directions.size(); ++k) F.col(int(k)) = directions[k];
+  const Eigen::ColPivHouseholderQR<Eigen::Matrix<double, 6, Eigen::Dynamic>> qr(F);
+  const Matrix6d Q = qr.householderQ();
+  return Q.rightCols(6 - int(qr.rank()));
+}
+
 Vector6d newton_step(const Matrix6d& Hq, const Vector6d& gq, double trust, const std::vector<Vector6d>& free) {
   // Directions curved less than a thousandth of the most curved one (flat, or downwards: not a minimum) take the
   // step that curvature would give; the trust radius then bounds the step.
@@ -89,11 +98,8 @@ Vector6d newton_step(const Matrix6d& Hq, const Vector6d& gq, double trust, const
   const Matrix6d& U = eig.eigenvectors();
   Vector6d step = -(U * curvature.cwiseInverse().asDiagonal() * U.transpose()) * gq;
   if (!free.empty()) {  // a declared symmetry's free directions: nothing to gain, only trust radius to waste
-    Eigen::Matrix<double, 6, Eigen::Dynamic> F(6, int(free.size()));
-    for (size_t k = 0; k < free.size(); ++k) F.col(int(k)) = free[k];
-    const Eigen::ColPivHouseholderQR<Eigen::Matrix<double, 6, Eigen::Dynamic>> qr(F);
-    const Eigen::MatrixXd Q = Eigen::MatrixXd(qr.householderQ()).leftCols(qr.rank());
-    step -= Q * (Q.transpose() * step);
+    const Eigen::Matrix<double, 6, Eigen::Dynamic> U = complement_of(free);
+    step = U * (U.transpose() * step);
   }
   const double length = step.norm();
   if (!std::isfinite(length)) return Vector6d::Zero();
@@ -144,15 +150,9 @@ PoseCurvature probe_pose_curvature(Renderer& renderer, const std::vector<ProbeVi
   out.hessian = L * Hq * L.transpose();
 
   // The directions a declared symmetry leaves free are not weaknesses of the data: search their complement.
-  Eigen::Matrix<double, 6, Eigen::Dynamic> U = Matrix6d::Identity();
-  if (!free_twists.empty()) {
-    Eigen::Matrix<double, 6, Eigen::Dynamic> F(6, int(free_twists.size()));
-    for (size_t k = 0; k < free_twists.size(); ++k) F.col(int(k)) = L.transpose() * free_twists[k];
-    Eigen::ColPivHouseholderQR<Eigen::Matrix<double, 6, Eigen::Dynamic>> fq(F);
-    const int rank = int(fq.rank());
-    const Matrix6d Q = fq.householderQ();
-    U = Q.rightCols(6 - rank);
-  }
+  std::vector<Vector6d> free_whitened;
+  for (const Vector6d& f : free_twists) free_whitened.push_back(L.transpose() * f);
+  const Eigen::Matrix<double, 6, Eigen::Dynamic> U = complement_of(free_whitened);
   const Eigen::MatrixXd Hs = U.transpose() * Hq * U;
   const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eig(Hs);
   if (eig.info() != Eigen::Success || Hs.rows() == 0) return out;
