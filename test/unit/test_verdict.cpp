@@ -179,3 +179,28 @@ TEST(Verdict, AWeakPrintLeavesMoreToTheShape) {
   e.mask_iou = 0.55;
   EXPECT_TRUE(judge(e, 0.5, 0.5, 1.0).plausible);
 }
+
+TEST(Verdict, AShapeWhoseDepthDisagreesOnAFifthOfItIsContradicted) {
+  // A plain can tilted in the plane of view: its outline barely changes, but its ends lie a centimetre and more
+  // off the observed depth. Half the evidence agreeing is not enough by default; a fifth disagreeing contradicts.
+  const test::LabelledCan s = test::labelled_can();
+  const Mesh plain = make_cylinder(0.035, 0.11, 64, make_flat_texture(Eigen::Vector3f(0.6f, 0.6f, 0.6f)));
+  RefinerOptions o;
+  o.batch_size = 4;
+  o.iterations = 0;  // score the start itself
+  o.image_scale = 1.0;
+  const Eigen::Vector3d centre = s.truth * plain.center();
+  const Eigen::Vector3d axis = s.truth.R * Eigen::Vector3d::UnitZ();
+  const Eigen::Matrix3d tilt =
+      Eigen::AngleAxisd(15 * M_PI / 180, axis.cross(centre).normalized()).toRotationMatrix();
+  const Pose tilted(tilt * s.truth.R, centre - tilt * (centre - s.truth.t));
+  const RefineResult right = Refiner(o).refine(s.cam, s.obs, plain, s.truth);
+  const RefineResult wrong = Refiner(o).refine(s.cam, s.obs, plain, tilted);
+  EXPECT_TRUE(right.plausible);
+  EXPECT_GT(wrong.mask_iou, o.min_mask_iou);  // the outline still fits
+  EXPECT_GT(wrong.depth_inliers, 0.5);
+  EXPECT_LT(wrong.depth_inliers, o.min_depth_inliers);
+  EXPECT_FALSE(wrong.plausible);
+  o.min_depth_inliers = 0.5;
+  EXPECT_TRUE(Refiner(o).refine(s.cam, s.obs, plain, tilted).plausible);
+}
