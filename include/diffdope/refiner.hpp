@@ -125,10 +125,11 @@ struct RefinerOptions {
   /// label) lines up only 1-3 standard deviations above chance at the right pose, while a print that is not
   /// even one above it does not line up at all. Between the bar and clear evidence (kClearPrint, 3) the shape
   /// must fit better (judge() in verdict.hpp); the scan's choices use kClearPrint too.
-  /// The shape's bars say that a fifth of the evidence disagreeing contradicts the pose: a result 10-20 mm off
-  /// (a cylinder tilted in its silhouette, a box turned into a look-alike outline) still overlaps a half, while
-  /// right ones overlap 0.9-1 with an exact mask and depth within inlier_threshold (docs/benchmarks.md, "The
-  /// verdict"). Lower them for a coarse detector mask or depth noisier than inlier_threshold.
+  /// The shape's bars say that a fifth of the evidence disagreeing contradicts the pose: results 12-185 mm off
+  /// that kept much of their outline (a tilted cylinder, a box turned into a look-alike outline) fall to 0.66-0.75
+  /// on mask or depth, right ones score 0.9-1 with an exact mask and depth within inlier_threshold
+  /// (docs/benchmarks.md, "The verdict"). Lower min_mask_iou for a coarse detector mask; raise inlier_threshold
+  /// for depth noisier than a third of it.
   double min_mask_iou = 0.8;       // [0, 1]
   double min_depth_inliers = 0.8;  // [0, 1]
   double min_print_significance = 1.0;  // [0, 100]

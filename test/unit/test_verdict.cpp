@@ -7,6 +7,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "diffdope/device.hpp"
+#include "diffdope/pose_curvature.hpp"
 #include "diffdope/procedural.hpp"
 #include "diffdope/refiner.hpp"
 #include "diffdope/synthetic.hpp"
@@ -191,9 +192,9 @@ TEST(Verdict, AShapeWhoseDepthDisagreesOnAFifthOfItIsContradicted) {
   o.image_scale = 1.0;
   const Eigen::Vector3d centre = s.truth * plain.center();
   const Eigen::Vector3d axis = s.truth.R * Eigen::Vector3d::UnitZ();
-  const Eigen::Matrix3d tilt =
-      Eigen::AngleAxisd(15 * M_PI / 180, axis.cross(centre).normalized()).toRotationMatrix();
-  const Pose tilted(tilt * s.truth.R, centre - tilt * (centre - s.truth.t));
+  Vector6d tilt = Vector6d::Zero();
+  tilt.tail<3>() = 15 * M_PI / 180 * axis.cross(centre).normalized();
+  const Pose tilted = twist_about(s.truth, tilt, centre);
   const RefineResult right = Refiner(o).refine(s.cam, s.obs, plain, s.truth);
   const RefineResult wrong = Refiner(o).refine(s.cam, s.obs, plain, tilted);
   EXPECT_TRUE(right.plausible);
