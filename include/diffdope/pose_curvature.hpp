@@ -43,9 +43,10 @@ Matrix6d secant_hessian(const std::vector<Vector6d>& gradients, const Matrix6d& 
 Eigen::Matrix<double, 6, Eigen::Dynamic> complement_of(const std::vector<Vector6d>& directions);
 
 /// The Newton step −H⁻¹ g in whitened coordinates (metres of RMS surface displacement), less its components
-/// along `free` (whitened directions a declared symmetry leaves free), at most `trust` long. Curvatures below a
-/// thousandth of the largest (a flat direction, or one curved downwards) are raised to it; zero when no
-/// direction curves upwards or the input is not finite.
+/// along `free` (whitened directions a declared symmetry leaves free). Curvatures below a thousandth of the
+/// largest (a flat direction, or one curved downwards) are raised to it. Longer than `trust`, it is damped to
+/// that length, −(H + λI)⁻¹ g (the trust-region step). Zero when no direction curves upwards or the input is not
+/// finite.
 Vector6d newton_step(const Matrix6d& Hq, const Vector6d& gq, double trust, const std::vector<Vector6d>& free = {});
 
 /// One image of a probed pose. Several views share the pose (a calibration's captures: one camera <- base, the

@@ -1,9 +1,10 @@
 #pragma once
 // How long a refinement will take, before it runs: a node serving requests on the same worker as its streaming
 // refinements must refuse one that would stop streaming for longer than its budget (~max_request_time).
-// The unit of work is one hypothesis evaluation (planned_evaluations() in refiner.hpp); what one costs is
-// learned from the refinements this process has timed, as objects, images and machines differ by orders of
-// magnitude.
+// The unit of work is one hypothesis evaluation; what one costs is learned from the refinements this process has
+// timed (the evaluations they made, RefineResult::evaluations), as objects, images and machines differ by orders
+// of magnitude. An estimate counts what the options plan at most (planned_evaluations() in refiner.hpp): early
+// stops make a refinement shorter, never longer.
 #include <deque>
 #include <string>
 
@@ -22,7 +23,7 @@ class RefineTimeEstimator {
 
   explicit RefineTimeEstimator(double prior_seconds_per_evaluation = kPriorSecondsPerEvaluation);
 
-  /// A refinement that ran `evaluations` (planned_evaluations() times its objects) took `seconds` of wall time.
+  /// A refinement that made `evaluations` (RefineResult::evaluations over its objects) took `seconds` of wall time.
   /// Ignored unless both are finite and positive.
   void observe(double evaluations, double seconds);
   /// Seconds per evaluation over the last kWindow observations (their total time over their total evaluations,

@@ -88,15 +88,19 @@ struct RefinerOptions {
   /// iterations 0 (scoring the start).
   int polish_iterations = 30;  // [0, kMaxIterations]
   int polish_runs = 4;         // [1, 16]
-  /// Newton steps: after the polish and the print alignment, each of newton_rounds rounds probes the loss's
-  /// curvature about the result (a secant Hessian from kSecantProbePoses gradients, ±h of surface displacement;
-  /// h one working pixel at the object's distance, halved every round) and tries a quarter, a half and all of
-  /// the Newton step on it (at most 2h). The best is taken when it lowers the loss by more than noise would
-  /// (3 nats of the covariance's noise model, pose_covariance()); otherwise the rounds end. Plain gradient steps are bounded by the stiffest direction (a
-  /// thin object across its width), so softer ones (its roll) are still converging when the iterations end
-  /// (docs/benchmarks.md). 0 = off (the paper's algorithm, and the calibration's default); never for tracked
-  /// starts (ObjectTarget::explore false) nor with iterations 0 (scoring the start).
-  int newton_rounds = 2;  // [0, 8]
+  /// Newton steps: after the polish and the print alignment, each of up to newton_rounds rounds probes the
+  /// loss's curvature about the result (a secant Hessian from kSecantProbePoses gradients, ±h of surface
+  /// displacement; h one working pixel at the object's distance at first) and tries a quarter, a half and all of
+  /// the Newton step on it, damped to at most 2h (trust region). The best is taken when it lowers the loss by more
+  /// than noise would (3 nats of the covariance's noise model, pose_covariance()). A round whose whole step the
+  /// trust radius held back doubles h (the valley goes on; up to a quarter of the diameter), any other halves it;
+  /// a round without a clear gain ends the rounds, or is tried again at half h when h had grown. Plain
+  /// gradient steps are bounded by the stiffest direction (a thin object across its width), so softer ones (its
+  /// roll) are still converging when the iterations end (docs/benchmarks.md). When the steps lowered the loss by
+  /// more than kPrintLossTolerance, the print alignment runs once more at the converged pose. 0 = off (the paper's
+  /// algorithm, and the calibration's default); never for tracked starts (ObjectTarget::explore false) nor with
+  /// iterations 0 (scoring the start).
+  int newton_rounds = 16;  // [0, 32]
   LossOptions loss;             // term weights (all 1 as in the paper) and robustness constants
   /// A plain model (Mesh::plain(): no print, one colour) gets no colour term: its flat render against a lit image
   /// sees only the lighting (the paper's T-LESS results are better without RGB). true = compare its colour anyway.
@@ -188,9 +192,10 @@ struct RefineResult {
   int scan_turns = 0;                 // candidates the shape scan (explore_tolerance) added: runs from turned poses
   bool scan_taken = false;            // the result is such a candidate, not the start's own basin (the evidence
                                       // was clear: jump_is_supported() in src/core/refine_run.hpp)
-  double print_turn = 0;              // radians the print alignment (print_search) turned the result by (0: none);
-                                      // `loss` is then at the turned pose, up to kPrintLossTolerance (2 %)
-                                      // above the winning run's best (and so, rarely, above initial_loss)
+  double print_turn = 0;              // radians the print alignment (print_search) turned the result by (0: none;
+                                      // the sum of both turns' angles when it ran again after the Newton
+                                      // steps); a turn may raise the loss up to kPrintLossTolerance (2 %) above
+                                      // the winning run's best (and so, rarely, above initial_loss)
   bool retried = false;               // the first result was rejected and refined again from turned starts
                                       // (retry_turn): the fields are the kept one's (initial_loss the
                                       // caller's starts'), start may then index a turned start, time_ms is both
@@ -198,6 +203,8 @@ struct RefineResult {
   int polish_iterations = 0;          // iterations of the polish (RefinerOptions::polish_iterations) run
   int newton_steps = 0;               // Newton steps taken (RefinerOptions::newton_rounds)
   double time_ms = 0;                 // wall time of refine() (refine_all(): from the call's start to this object's end)
+  long evaluations = 0;               // hypothesis evaluations made (renders of one pose, with or without loss and
+                                      // gradient; a retry's included): what planned_evaluations() bounds
   // Quality scores at the refined pose (at the refiner's image scale).
   double mask_iou = -1;               // IoU of rendered and observed masks (with depth, the render less where the
                                       // observed depth shows an occluder in front: loss.occlusion_margin); -1
@@ -226,9 +233,12 @@ struct RefineResult {
 std::vector<std::string> used_terms(const LossOptions& loss);
 
 /// Whether the retry of a rejected result (RefinerOptions::retry_turn) replaces the first: only when the verdict
-/// accepts it and its loss is lower. A retry rejected too keeps the first result, the one nearer the caller's
-/// start: with weak evidence (RGB alone) a start turned 30-40 degrees can end a fraction of a percent lower.
-bool retry_replaces(const RefineResult& first, const RefineResult& retry);
+/// accepts it, and its loss is lower or (`weigh_print`: the verdict weighs this object's print) its print
+/// registers kClearPrint standard deviations better than the first's (one below chance counting as 0): the colour
+/// term can favour a wrong turn, the print's registration cannot be lit into agreement. A retry rejected too keeps
+/// the first result, the one nearer the caller's start: with weak evidence (RGB alone) a start turned 30-40
+/// degrees can end a fraction of a percent lower.
+bool retry_replaces(const RefineResult& first, const RefineResult& retry, bool weigh_print);
 
 /// One object of a frame for Refiner::refine_all().
 struct ObjectTarget {
@@ -350,7 +360,7 @@ class Refiner {
 /// Hypothesis evaluations (one render + loss + gradient of one pose) that refining one object with `o` costs at
 /// most: the runs of every iteration, less those successive halving drops, the shape scan as for a shape with
 /// the most turns (kMaxShapeTurns; an asymmetric one has none) and its candidate run, the polish, the print
-/// alignment, the Newton steps and the final scoring. An early stop (of the descent, the polish or the Newton
+/// alignment and the Newton steps (each twice: they run again when the steps move far) and the final scoring. An early stop (of the descent, the polish or the Newton
 /// rounds) only lowers it; a retry of a rejected result (retry_turn) doubles it for that object. The unit of
 /// RefineTimeEstimator (refine_time.hpp).
 long planned_evaluations(const RefinerOptions& o);

@@ -88,23 +88,35 @@ Eigen::Matrix<double, 6, Eigen::Dynamic> complement_of(const std::vector<Vector6
 }
 
 Vector6d newton_step(const Matrix6d& Hq, const Vector6d& gq, double trust, const std::vector<Vector6d>& free) {
-  // Directions curved less than a thousandth of the most curved one (flat, or downwards: not a minimum) take the
-  // step that curvature would give; the trust radius then bounds the step.
-  const Eigen::SelfAdjointEigenSolver<Matrix6d> eig(Hq);
-  if (eig.info() != Eigen::Success || !gq.allFinite() || !(eig.eigenvalues().maxCoeff() > 0)) return Vector6d::Zero();
-  Vector6d curvature = eig.eigenvalues();
+  // In the complement of a declared symmetry's free directions (nothing to gain there). Directions curved less
+  // than a thousandth of the most curved one (flat, or downwards: not a minimum) take the step that curvature
+  // would give. A step longer than the trust radius is damped, not shortened: -(H + λI)⁻¹ g with λ making it
+  // `trust` long (Levenberg-Marquardt), so the barely curved directions, whose long steps follow mostly noise,
+  // give way first and the well curved ones keep their Newton length.
+  if (!gq.allFinite() || !Hq.allFinite() || !(trust > 0)) return Vector6d::Zero();
+  const Eigen::Matrix<double, 6, Eigen::Dynamic> U = complement_of(free);
+  if (U.cols() == 0) return Vector6d::Zero();
+  const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eig(U.transpose() * Hq * U);
+  if (eig.info() != Eigen::Success || !(eig.eigenvalues().maxCoeff() > 0)) return Vector6d::Zero();
+  Eigen::VectorXd curvature = eig.eigenvalues();
   const double floor = 1e-3 * curvature.maxCoeff();
-  for (int i = 0; i < 6; ++i) curvature[i] = std::max(curvature[i], floor);
-  const Matrix6d& U = eig.eigenvectors();
-  Vector6d step = -(U * curvature.cwiseInverse().asDiagonal() * U.transpose()) * gq;
-  if (!free.empty()) {  // a declared symmetry's free directions: nothing to gain, only trust radius to waste
-    const Eigen::Matrix<double, 6, Eigen::Dynamic> U = complement_of(free);
-    step = U * (U.transpose() * step);
+  curvature = curvature.cwiseMax(floor);
+  const Eigen::MatrixXd basis = U * eig.eigenvectors();  // orthonormal columns: |basis x| = |x|
+  const Eigen::VectorXd g = basis.transpose() * gq;
+  const auto damped = [&](double lambda) -> Eigen::VectorXd { return -g.array() / (curvature.array() + lambda); };
+  Eigen::VectorXd x = damped(0.0);
+  if (!x.allFinite()) return Vector6d::Zero();
+  if (x.norm() > trust) {
+    // |damped(λ)| falls with λ and is at most |g| / λ: bisect (in log scale) between 0 and |g| / trust.
+    double lo = 0.0, hi = g.norm() / trust;
+    for (int k = 0; k < 60; ++k) {
+      const double mid = lo > 0 ? std::sqrt(lo * hi) : 0.5 * hi;
+      (damped(mid).norm() > trust ? lo : hi) = mid;
+    }
+    x = damped(hi);
+    if (x.norm() > trust) x *= trust / x.norm();  // (rounding)
   }
-  const double length = step.norm();
-  if (!std::isfinite(length)) return Vector6d::Zero();
-  if (length > trust) step *= trust / length;
-  return step;
+  return basis * x;
 }
 
 PoseCurvature probe_pose_curvature(Renderer& renderer, const Camera& camera, const Mesh& mesh,

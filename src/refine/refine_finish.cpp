@@ -29,6 +29,7 @@ double RefineRun::print_significance(Renderer& renderer, const Pose& pose) const
   // A continuous declared symmetry turns the print with the object: it cannot be registered along that axis.
   if (meshes_.size() != 1 || !fine_[0].obs.has_rgb() || !meshes_[0]->symmetry.continuous.empty())
     return std::numeric_limits<double>::quiet_NaN();
+  ++evaluations_;
   return register_render(renderer.render(fine_[0].cam, *meshes_[0], {pose}, fine_[0].obs.mask)[0]).significance();
 }
 
@@ -44,9 +45,9 @@ bool jump_is_supported(const JumpEvidence& from, const JumpEvidence& to, double 
   return to.loss < (1.0 - jump_margin(angle)) * from.loss;
 }
 
-bool turn_is_supported(double z_from, double z_to, bool weigh_print) {
-  if (!weigh_print || !std::isfinite(z_from)) return true;
-  return std::isfinite(z_to) && z_to >= z_from - kPrintContradiction;
+bool turn_is_supported(double z_from, double z_to, double min_significance) {
+  if (!(min_significance > 0) || !std::isfinite(z_from)) return true;
+  return std::isfinite(z_to) && z_to >= z_from - kPrintContradiction && z_to >= min_significance;
 }
 
 void RefineRun::polish(Renderer& renderer, RefineResult& res) {
@@ -94,27 +95,47 @@ void RefineRun::newton(Renderer& renderer, RefineResult& res) {
   for (size_t v = 0; v < meshes_.size(); ++v) {
     const cv::Mat& mask = fine_[v].obs.mask;
     const RenderImage img = renderer.render(fine_[v].cam, *meshes_[v], {res.pose}, mask)[0];
+    ++evaluations_;
     pixels += cv::countNonZero((mask >= 0.5f) | (img.coverage >= 0.5f));
   }
   const double residuals = std::max(1.0, pixels / kCorrelatedPixels);
   // The first probe reaches one working pixel at the object's distance: the scale below which the plain steps'
-  // hopping and the antialiased silhouette blur the loss.
+  // hopping and the antialiased silhouette blur the loss. The trust radius is twice the probe's reach: a round
+  // whose whole step was held back by it (the loss's valley goes on) doubles both, up to a quarter of the
+  // object's diameter; any other round halves them. A round without a clear gain (or whose probe left the image)
+  // ends the steps, unless the reach had grown: it is then tried again at half.
   const Camera& cam = fine_[0].cam;
-  double h = (res.pose * pivot_model_).z() / std::max(cam.fx, cam.fy);
+  const double first_reach = (res.pose * pivot_model_).z() / std::max(cam.fx, cam.fy);
+  const double max_reach = std::max(first_reach, 0.25 * diameter_);
+  double h = first_reach;
   std::vector<Vector6d> free;  // a declared symmetry's free twists, whitened (as the curvature probe leaves out)
   if (meshes_.size() == 1)
     for (const Vector6d& f : meshes_[0]->symmetry.free_twists(res.pose, res.pose * pivot_model_)) free.push_back(L.transpose() * f);
   std::vector<LossValue> v, tried;
   std::vector<Vector6d> gradients(kSecantProbePoses);
-  for (int round = 0; round < newton_rounds_ && h > 0; ++round, h *= 0.5) {
+  for (int round = 0; round < newton_rounds_ && h > 0; ++round) {
+    const auto give_up = [&] {  // (true: the rounds end)
+      if (h <= first_reach) return true;
+      h *= 0.5;
+      return false;
+    };
     const Eigen::Vector3d pivot = res.pose * pivot_model_;
     evaluate(renderer, secant_probe_poses(res.pose, LinvT, h, pivot), loss_, true, v, true);
-    for (int k = 0; k < kSecantProbePoses; ++k) {
-      if (!std::isfinite(v[size_t(k)].total)) return;  // a probe left the image
-      gradients[size_t(k)] = gradient_about(v[size_t(k)].gradient, pivot);
+    bool probed = true;
+    for (int k = 0; k < kSecantProbePoses && probed; ++k) {
+      probed = std::isfinite(v[size_t(k)].total);  // (not: a probe left the image)
+      if (probed) gradients[size_t(k)] = gradient_about(v[size_t(k)].gradient, pivot);
     }
-    const Vector6d step = newton_step(secant_hessian(gradients, Linv, h), Linv * gradients.back(), 2 * h, free);
-    if (step.isZero()) return;
+    if (!probed) {
+      if (give_up()) return;
+      continue;
+    }
+    const double trust = 2 * h;
+    const Vector6d step = newton_step(secant_hessian(gradients, Linv, h), Linv * gradients.back(), trust, free);
+    if (step.isZero()) {
+      if (give_up()) return;
+      continue;
+    }
     std::vector<Pose> poses;
     for (const double share : {0.25, 0.5, 1.0}) poses.push_back(twist_about(res.pose, share * (LinvT * step), pivot));
     evaluate(renderer, poses, loss_, false, tried, true);
@@ -122,10 +143,15 @@ void RefineRun::newton(Renderer& renderer, RefineResult& res) {
     for (size_t j = 1; j < poses.size(); ++j)
       if (std::isfinite(tried[j].total) && !(tried[best].total <= tried[j].total)) best = j;  // (never a non-finite one)
     const double gain = residuals * (res.loss.total - tried[best].total) / std::max(res.loss.total, 1e-12);
-    if (!(gain > kNewtonEvidence)) return;
+    if (!(gain > kNewtonEvidence)) {
+      if (give_up()) return;
+      continue;
+    }
     res.pose = poses[best];
     res.loss = tried[best];
     ++res.newton_steps;
+    const bool held_back = best + 1 == poses.size() && step.norm() >= (1.0 - 1e-3) * trust;
+    h = held_back ? std::min(2 * h, max_reach) : 0.5 * h;
   }
 }
 
@@ -164,7 +190,16 @@ RefineResult RefineRun::finish(Renderer& renderer) {
   polish(renderer, res);
   if (!(res.pose.R == before_polish.R && res.pose.t == before_polish.t)) print.known = false;  // measured elsewhere
   align_result_print(renderer, res, print);
+  const double aligned_loss = res.loss.total;
   newton(renderer, res);
+  if (res.loss.total < (1.0 - kPrintLossTolerance) * aligned_loss) {
+    // The steps went on well past what the alignment compared its turns against: it weighed the turns of a
+    // result that was not yet converged. Once more from the converged one.
+    const Pose converged = res.pose;
+    print.known = false;
+    align_result_print(renderer, res, print);
+    if (!(res.pose.R == converged.R && res.pose.t == converged.t)) newton(renderer, res);
+  }
   // Of the poses a declared symmetry makes equivalent, the one nearest the start: a track does not spin.
   if (meshes_.size() == 1) res.pose = meshes_.front()->symmetry.nearest_equivalent(res.pose, res.initial_pose.R);
   const int rendered_pixels = score_views(renderer, res);
@@ -238,13 +273,14 @@ void RefineRun::align_result_print(Renderer& renderer, RefineResult& res, Result
   evaluate(renderer, {aligned}, loss_, false, v, true);
   const double angle = Eigen::AngleAxisd(res.pose.R.transpose() * aligned.R).angle();
   // The turns of several axes together may cost no more than one may (kPrintLossTolerance), and the print's
-  // registration must not contradict the turn (turn_is_supported).
+  // registration must not contradict the turn, and must register where it turned (turn_is_supported).
+  const double z_aligned = print_significance(renderer, aligned);
   if (v[0].total <= (1.0 + kPrintLossTolerance) * res.loss.total &&
-      turn_is_supported(print.at(renderer, res), print_significance(renderer, aligned),
-                        options_.min_print_significance > 0)) {
-    res.print_turn = angle;
+      turn_is_supported(print.at(renderer, res), z_aligned, options_.min_print_significance)) {
+    res.print_turn += angle;
     res.pose = aligned;
     res.loss = v[0];
+    print.z = z_aligned, print.known = true;
   }
 }
 
@@ -257,6 +293,7 @@ int RefineRun::score_views(Renderer& renderer, RefineResult& res) const {
     const Observation& obs = fine_[v].obs;
     RefineResult::ViewScores scores;
     const RenderImage img = renderer.render(cam, *meshes_[v], {res.pose}, obs.mask)[0];
+    ++evaluations_;
     const cv::Mat rendered = img.coverage >= 0.5f;
     rendered_pixels += cv::countNonZero(rendered);
     if (has_mask_) {
@@ -284,6 +321,7 @@ int RefineRun::score_views(Renderer& renderer, RefineResult& res) const {
     if (!one_view) {
       std::vector<LossValue> value;
       renderer.evaluate(cam, *meshes_[v], obs, {res.pose}, loss_, false, value);
+      ++evaluations_;
       scores.loss = value[0].total;
     }
     const auto weakest = [](double a, double b) { return a < 0 ? b : b < 0 ? a : std::min(a, b); };
@@ -309,6 +347,8 @@ void RefineRun::judge_result(Renderer& renderer, RefineResult& res, int rendered
       res.curvature = probe_pose_curvature(renderer, views, loss_, res.pose, pivot_model_, o.probe_distance);
     }
   }
+  if (o.probe_distance > 0 && std::isfinite(res.loss.total))
+    evaluations_ += long(kCurvatureProbeEvaluations * meshes_.size());
   res.pivot = res.pose * pivot_model_;
   res.covariance = pose_covariance(res.curvature, rendered_pixels, diameter_);
   const size_t n = res.history.size(), tail = std::max<size_t>(2, n / 10);
@@ -325,6 +365,7 @@ void RefineRun::judge_result(Renderer& renderer, RefineResult& res, int rendered
   res.plausible = std::isfinite(res.loss.total) && verdict.plausible;
   res.confidence = std::isfinite(res.loss.total) ? verdict.confidence : 0.0;
   res.time_ms = milliseconds_since(start_time_);
+  res.evaluations = evaluations_;
 }
 
 }  // namespace diffdope

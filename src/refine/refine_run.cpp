@@ -171,6 +171,7 @@ RefineRun::RefineRun(const RefinerOptions& o, const std::vector<RefineView>& vie
 void RefineRun::evaluate(Renderer& renderer, const std::vector<Pose>& poses, const LossOptions& loss,
                          bool with_gradient, std::vector<LossValue>& out, bool fine) {
   const auto level = [&](size_t v) -> const Level& { return fine || !coarse() ? fine_[v] : coarse_[v]; };
+  evaluations_ += long(poses.size() * meshes_.size());
   if (meshes_.size() == 1) {
     renderer.evaluate(level(0).cam, *meshes_[0], level(0).obs, poses, loss, with_gradient, out);
     return;

@@ -33,9 +33,11 @@ double jump_margin(double angle);
 bool jump_is_supported(const JumpEvidence& from, const JumpEvidence& to, double angle, bool weigh_print);
 /// Whether the print's registration allows the print alignment's turn from a pose whose print significance is
 /// z_from to one whose is z_to: not lower by more than kPrintContradiction (the alignment's texture term found
-/// the turn; a registration that falls says the turn moved the print away). Always when the print is not
-/// weighed or z_from not measured.
-bool turn_is_supported(double z_from, double z_to, bool weigh_print);
+/// the turn; a registration that falls says the turn moved the print away), and at least the verdict's bar
+/// `min_significance` (a turn to where the print does not register is not the print's doing: a result still far
+/// from converged compares labels drawn out of place). Always when the print is not weighed (min_significance
+/// 0) or z_from not measured.
+bool turn_is_supported(double z_from, double z_to, double min_significance);
 
 class RefineRun {
  public:
@@ -88,6 +90,9 @@ class RefineRun {
                 std::vector<LossValue>& out, bool fine = false);
   /// Winner and quality scores (renders the refined pose once per view).
   RefineResult finish(Renderer& renderer);
+  /// Counts evaluations made for this run outside evaluate() (refine_all's joint renderer calls), for
+  /// RefineResult::evaluations.
+  void count_evaluations(long n) { evaluations_ += n; }
   /// Iterations of the last descent from the chosen pose (RefinerOptions::polish_iterations; 0: none).
   void set_polish(int iterations) { polish_iterations_ = iterations; }
   /// Rounds of Newton steps after the print alignment (RefinerOptions::newton_rounds; 0: none).
@@ -142,6 +147,7 @@ class RefineRun {
   double print_range_ = 0;
   int polish_iterations_ = 0;
   int newton_rounds_ = 0;
+  mutable long evaluations_ = 0;  // hypothesis evaluations (and plain renders) so far, every view
   /// The last descent (RefinerOptions::polish_iterations) from res.pose, keeping the lowest loss seen.
   void polish(Renderer& renderer, RefineResult& res);
   /// The Newton steps (RefinerOptions::newton_rounds) from res.pose, each taken on kNewtonEvidence.

@@ -73,12 +73,19 @@ RefineResult failed_result(const Pose& initial, const std::string& why) {
   return r;
 }
 
+/// Whether the verdict weighs the print of `mesh`: not when turned off, nor about a continuous declared symmetry
+/// (the print turns with the object).
+bool weighs_print(const RefinerOptions& o, const Mesh& mesh) {
+  return o.min_print_significance > 0 && mesh.symmetry.continuous.empty();
+}
+
 /// A rejected result and its retry's (RefinerOptions::retry_turn), the one retry_replaces() picks; initial_loss
 /// stays the caller's starts' and time_ms covers both refinements.
-RefineResult keep_better(RefineResult first, RefineResult retry, double time_ms) {
+RefineResult keep_better(RefineResult first, RefineResult retry, double time_ms, bool weigh_print) {
   const double initial_loss = first.initial_loss;
-  RefineResult& kept = retry_replaces(first, retry) ? retry : first;
+  RefineResult& kept = retry_replaces(first, retry, weigh_print) ? retry : first;
   kept.initial_loss = initial_loss;
+  kept.evaluations = first.evaluations + retry.evaluations;
   kept.retried = true;
   kept.time_ms = time_ms;
   return std::move(kept);
@@ -94,8 +101,14 @@ std::vector<std::string> used_terms(const LossOptions& l) {
   return out;
 }
 
-bool retry_replaces(const RefineResult& first, const RefineResult& retry) {
-  return retry.error.empty() && retry.plausible && retry.loss.total < first.loss.total;
+bool retry_replaces(const RefineResult& first, const RefineResult& retry, bool weigh_print) {
+  if (!retry.error.empty() || !retry.plausible) return false;
+  if (retry.loss.total < first.loss.total) return true;
+  // The colour term compares a flat render with a lit image: a turned pose can fit the lighting better than the
+  // truth does, and a better converged wrong basin then ends lower. The print tells them apart.
+  const double z_first = first.print.significance(), z_retry = retry.print.significance();
+  return weigh_print && std::isfinite(z_first) && std::isfinite(z_retry) &&
+         z_retry - std::max(z_first, 0.0) >= kClearPrint;
 }
 
 void Refiner::prepare(const Mesh& mesh) {
@@ -126,7 +139,7 @@ RefineResult Refiner::refine(const Camera& camera, const Observation& observed, 
   if (!wants_retry(o, first)) return first;
   // The retry's starts are the same input turned: what the first pass accepted, it accepts.
   RefineResult retry = refine_once(o, camera, observed, mesh, retry_starts(o, mesh, initials));
-  return keep_better(std::move(first), std::move(retry), milliseconds_since(start));
+  return keep_better(std::move(first), std::move(retry), milliseconds_since(start), weighs_print(o, mesh));
 }
 
 RefineResult Refiner::refine_once(const RefinerOptions& o, const Camera& camera, const Observation& observed,
@@ -264,7 +277,9 @@ std::vector<RefineResult> Refiner::refine_all(const Camera& camera, const Observ
   if (again.empty()) return out;
   std::vector<RefineResult> retried = refine_all_once(o, camera, frame, again);
   const double ms = milliseconds_since(start);
-  for (size_t j = 0; j < which.size(); ++j) out[which[j]] = keep_better(std::move(out[which[j]]), std::move(retried[j]), ms);
+  for (size_t j = 0; j < which.size(); ++j)
+    out[which[j]] =
+        keep_better(std::move(out[which[j]]), std::move(retried[j]), ms, weighs_print(o, *objects[which[j]].mesh));
   return out;
 }
 
@@ -348,7 +363,10 @@ std::vector<RefineResult> Refiner::refine_all_once(const RefinerOptions& options
         }
       }
       for (size_t j = 0; j < which.size(); ++j)
-        if (runs[which[j]]) runs[which[j]]->absorb(values[j], nullptr);
+        if (runs[which[j]]) {
+          runs[which[j]]->count_evaluations(long(batches[j].poses.size()));
+          runs[which[j]]->absorb(values[j], nullptr);
+        }
     }
   }
   for (size_t k = 0; k < runs.size(); ++k) {
@@ -378,12 +396,15 @@ long planned_evaluations(const RefinerOptions& o) {
   }
   // finish(): the initial loss at the fine scale, a candidate's print registration (two renders), the polish,
   // the print alignment (one axis, and the loss and registration at its turn), the Newton steps (a render for
-  // the pixel count, then per round a probe and three tries), the scoring render and the curvature probe.
+  // the pixel count, then per round a probe and three tries), both once more when the steps moved far, the
+  // scoring render and the curvature probe.
   const long candidate = scan_at >= 0 && scan_at < o.iterations ? 2 : 0;
   const long print = o.explore_tolerance > 0 ? print_alignment_evaluations(o.print_search) + 2 : 0;
   const long polish = o.polish_iterations > 0 && o.iterations > 0 ? 1 + long(o.polish_runs) * o.polish_iterations : 0;
   const long newton = o.newton_rounds > 0 && o.iterations > 0 ? 1 + long(o.newton_rounds) * (kSecantProbePoses + 3) : 0;
-  return total + 2 + candidate + print + polish + newton + (o.probe_distance > 0 ? kCurvatureProbeEvaluations : 0);
+  const long passes = print > 0 && newton > 0 ? 2 : 1;
+  return total + 2 + candidate + polish + passes * (print + newton) +
+         (o.probe_distance > 0 ? kCurvatureProbeEvaluations : 0);
 }
 
 }  // namespace diffdope

@@ -149,9 +149,9 @@ const std::vector<OptionSpec<RefinerOptions>>& refiner_option_table() {
         option_row("polish_iterations", &O::polish_iterations, 0, O::kMaxIterations, " (0: off)",
                    "after the descent, polish_runs runs go on from the result at small rates"),
         option_row("polish_runs", &O::polish_runs, 1, 16, "", "runs of the polish, at lr_low doubling per run"),
-        option_row("newton_rounds", &O::newton_rounds, 0, 8, " (0: off)",
-                   "then Newton steps on the loss's probed curvature, taken on clear evidence; each round probes "
-                   "half as far"),
+        option_row("newton_rounds", &O::newton_rounds, 0, 32, " (0: off)",
+                   "then Newton steps on the loss's probed curvature, taken on clear evidence; the reach doubles "
+                   "while the valley goes on, else halves"),
         option_row("seed", &O::seed, 0, 0, "", "learning-rate draws: same seed, same inputs, same result"),
         option_row("successive_halving", &O::successive_halving, 0, 0, "",
                    "keep the better half of the runs at 25, 50 and 75 % of the iterations (false: the paper's algorithm)"),

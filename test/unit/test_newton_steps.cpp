@@ -13,6 +13,7 @@
 #include "diffdope/procedural.hpp"
 #include "diffdope/refiner.hpp"
 #include "diffdope/synthetic.hpp"
+#include "test_scenes.hpp"
 
 using namespace diffdope;
 
@@ -48,7 +49,7 @@ TEST(NewtonSteps, ConvergeAThinObjectWherePlainStepsStopShort) {
   for (uint32_t seed = 1; seed <= 4; ++seed) {
     std::mt19937_64 rng(seed);
     const Pose init = perturb_pose(s.truth, s.mesh.center(), 10 * M_PI / 180, 0.01, rng);  // a medium start
-    const RefineResult plain = refine_with(s, init, 0), newton = refine_with(s, init, 2);
+    const RefineResult plain = refine_with(s, init, 0), newton = refine_with(s, init, RefinerOptions().newton_rounds);
     EXPECT_EQ(plain.newton_steps, 0);
     EXPECT_GE(newton.newton_steps, 1) << "seed " << seed;
     EXPECT_LE(newton.loss.total, plain.loss.total) << "seed " << seed;
@@ -65,11 +66,35 @@ TEST(NewtonSteps, LeaveAPoseTheLossCannotImproveAsItWas) {
   SyntheticNoise none;
   none.rgb_sigma = 0, none.depth_sigma_at_1m = 0, none.hole_fraction = 0;
   const BarScene s{none};
-  const RefineResult plain = refine_with(s, s.truth, 0), newton = refine_with(s, s.truth, 2);
+  const RefineResult plain = refine_with(s, s.truth, 0), newton = refine_with(s, s.truth, RefinerOptions().newton_rounds);
   EXPECT_EQ(newton.newton_steps, 0);
   EXPECT_EQ(newton.pose.t, plain.pose.t);
   EXPECT_EQ(newton.pose.R, plain.pose.R);
   EXPECT_EQ(newton.loss.total, plain.loss.total);
+}
+
+TEST(NewtonSteps, GrowTheirReachAlongAValleyThatGoesOn) {
+  // A start 2 cm too far along the line of sight and 4 degrees rolled, and next to no descent before the steps
+  // (one iteration at a negligible rate). The first round may move 4 mm (twice one working pixel at 60 cm, at
+  // image_scale 0.5); a round whose whole step that held back doubles it, so the rounds reach the truth. A reach
+  // halved every round would end at least 12 mm from it.
+  const BarScene s{SyntheticNoise()};
+  RefinerOptions o = test::steps_only_options();
+  o.explore_tolerance = 0;
+  o.print_search = 0;
+  Vector6d roll = Vector6d::Zero();
+  roll.tail<3>() = s.truth.R.col(0) * (4 * M_PI / 180);  // about the bar's length
+  Pose init = twist_about(s.truth, roll, s.truth * s.mesh.center());
+  init.t.z() += 0.02;
+  const auto points = metric_points(s.mesh);
+  const double start_mm = 1e3 * add_error(points, init, s.truth);
+  ASSERT_GT(start_mm, 20.0);
+  o.newton_rounds = 8;
+  const RefineResult r = Refiner(o).refine(s.cam, s.obs, s.mesh, init);
+  EXPECT_GE(r.newton_steps, 3);
+  EXPECT_LT(1e3 * add_error(points, r.pose, s.truth), 0.5) << "from " << start_mm << " mm";
+  o.newton_rounds = 0;
+  EXPECT_GT(1e3 * add_error(points, Refiner(o).refine(s.cam, s.obs, s.mesh, init).pose, s.truth), 0.9 * start_mm);
 }
 
 TEST(NewtonStep, SolvesAQuadraticModelWithinItsTrustRadius) {
@@ -81,10 +106,17 @@ TEST(NewtonStep, SolvesAQuadraticModelWithinItsTrustRadius) {
   g << 0.3, -0.2, 0.1, 0.05, -0.4, 0.2;
   const Vector6d exact = -H.ldlt().solve(g);
   EXPECT_LT((newton_step(H, g, 1e3) - exact).norm(), 1e-9 * exact.norm());
-  // Clipped to the trust radius, along the same direction.
-  const Vector6d clipped = newton_step(H, g, 0.1 * exact.norm());
-  EXPECT_NEAR(clipped.norm(), 0.1 * exact.norm(), 1e-12);
-  EXPECT_GT(clipped.normalized().dot(exact.normalized()), 1 - 1e-9);
+  // Beyond the trust radius: damped to it, -(H + λI)⁻¹ g for a λ > 0, which lowers the quadratic model more than
+  // the Newton step shortened to that length would.
+  const double trust = 0.1 * exact.norm();
+  const Vector6d damped = newton_step(H, g, trust);
+  EXPECT_NEAR(damped.norm(), trust, 1e-6 * trust);
+  const Vector6d residual = H * damped + g;
+  const double lambda = -residual.dot(damped) / damped.squaredNorm();
+  EXPECT_GT(lambda, 0);
+  EXPECT_LT((residual + lambda * damped).norm(), 1e-6 * g.norm());
+  const auto model = [&](const Vector6d& x) { return g.dot(x) + 0.5 * x.dot(H * x); };
+  EXPECT_LT(model(damped), model(0.1 * exact));
   // A direction curved downwards is not followed uphill: its curvature is raised to a thousandth of the largest,
   // so the step still lowers the quadratic model there.
   curvatures[2] = -1;
@@ -102,6 +134,11 @@ TEST(NewtonStep, SolvesAQuadraticModelWithinItsTrustRadius) {
   EXPECT_NEAR(U.col(0).dot(free_step), 0, 1e-12);
   EXPECT_NEAR(U.col(3).dot(free_step), 0, 1e-12);
   EXPECT_NEAR(U.col(1).dot(free_step), U.col(1).dot(exact), 1e-9);
+  // Damped within the free directions' complement: still none of the step along them, and trust long.
+  const Vector6d damped_free = newton_step(H, g, 0.05 * exact.norm(), {U.col(0), U.col(3)});
+  EXPECT_NEAR(damped_free.norm(), 0.05 * exact.norm(), 1e-6 * exact.norm());
+  EXPECT_NEAR(U.col(0).dot(damped_free), 0, 1e-12);
+  EXPECT_NEAR(U.col(3).dot(damped_free), 0, 1e-12);
 }
 
 TEST(SecantHessian, RecoversAQuadraticLossInWhitenedUnits) {

@@ -6,6 +6,7 @@
 #include <limits>
 
 #include "diffdope/pose_curvature.hpp"
+#include "diffdope/print_alignment.hpp"
 #include "diffdope/refine_time.hpp"
 
 using namespace diffdope;
@@ -33,6 +34,14 @@ TEST(PlannedEvaluations, RunsTimesIterationsLessWhatHalvingDrops) {
   o.iterations = 100;
   o.probe_distance = 0;
   EXPECT_EQ(planned_evaluations(o), 16 * 25 + 8 * 25 + 4 * 25 + 2 * 25 + 2 + 2 + 1 + 2 * (kSecantProbePoses + 3));
+  // With the shape scan, and so the print alignment: when the steps move far, the alignment and the steps run
+  // once more.
+  o.explore_tolerance = 0.01;
+  o.newton_rounds = 0;
+  const long without = planned_evaluations(o);
+  o.newton_rounds = 2;
+  const long newton = 1 + 2 * (kSecantProbePoses + 3), print = print_alignment_evaluations(o.print_search) + 2;
+  EXPECT_EQ(planned_evaluations(o) - without, 2 * newton + print);
 }
 
 TEST(RefineTimeEstimator, UsesThePriorUntilARefinementWasTimed) {

@@ -133,6 +133,12 @@ TEST(Refiner, SuccessiveHalvingDropsTheWorseHalfThreeTimes) {
     return n;
   };
   EXPECT_EQ(evaluated(r) + 2, planned_evaluations(o));
+  // RefineResult::evaluations (the time estimator's unit of cost): what was made, within what was planned, the
+  // same when refine_all() evaluates the runs in its joint calls.
+  EXPECT_GE(r.evaluations, evaluated(r));
+  EXPECT_LE(r.evaluations, planned_evaluations(o));
+  const ObjectTarget target{&s.mesh, init, s.obs.mask, {}, true};
+  EXPECT_EQ(Refiner(o).refine_all(s.cam, s.obs, {target})[0].evaluations, r.evaluations);
   o.successive_halving = false;
   const RefineResult all = Refiner(o).refine(s.cam, s.obs, s.mesh, init);
   for (const auto& h : all.run_histories) EXPECT_EQ(h.size(), 21u);
@@ -523,22 +529,47 @@ TEST(Refiner, ARejectedResultIsRefinedAgainFromTurnedStarts) {
 }
 
 
-TEST(Refiner, ARetryReplacesTheFirstResultOnlyWhenAcceptedAndLower) {
+TEST(Refiner, ARetryReplacesTheFirstResultOnlyWhenAcceptedAndLowerOrClearlyBetterPrinted) {
+  const auto printed = [](double z) {  // a registration z standard deviations above its chance level
+    PrintRegistration p;
+    p.ncc = 0.1 * z;
+    p.far_mean = 0.0;
+    p.far_std = 0.1;
+    return p;
+  };
   RefineResult first;
   first.plausible = false;
   first.loss.total = 0.40;
   RefineResult retry;
   retry.plausible = true;
   retry.loss.total = 0.30;
-  EXPECT_TRUE(retry_replaces(first, retry));
-  retry.loss.total = 0.45;  // accepted but worse fit
-  EXPECT_FALSE(retry_replaces(first, retry));
+  EXPECT_TRUE(retry_replaces(first, retry, true));
+  retry.loss.total = 0.45;  // accepted but worse fit, the print measured at neither
+  EXPECT_FALSE(retry_replaces(first, retry, true));
+  // A worse fit whose print registers clearly where the first's did not: the colour term favoured a wrong turn.
+  first.print = printed(0.2);
+  retry.print = printed(0.2 + kClearPrint + 0.5);
+  EXPECT_TRUE(retry_replaces(first, retry, true));
+  EXPECT_FALSE(retry_replaces(first, retry, false));  // the print not weighed
+  retry.print = printed(0.2 + kClearPrint - 0.5);     // better, but not clearly
+  EXPECT_FALSE(retry_replaces(first, retry, true));
+  first.print = PrintRegistration();  // not measured at the first: nothing to weigh
+  retry.print = printed(8.0);
+  EXPECT_FALSE(retry_replaces(first, retry, true));
+  first.print = printed(-1.0);  // below chance: counts as 0
+  retry.print = printed(kClearPrint - 0.5);
+  EXPECT_FALSE(retry_replaces(first, retry, true));
+  retry.print = printed(kClearPrint + 0.5);
+  EXPECT_TRUE(retry_replaces(first, retry, true));
+  first.print = printed(2.0);  // both register: the loss decides
+  retry.print = printed(4.5);
+  EXPECT_FALSE(retry_replaces(first, retry, true));
   retry.loss.total = 0.30;
   retry.plausible = false;  // rejected too: lower loss alone does not win (RGB-only turned starts)
-  EXPECT_FALSE(retry_replaces(first, retry));
+  EXPECT_FALSE(retry_replaces(first, retry, true));
   retry.plausible = true;
   retry.error = "lost";
-  EXPECT_FALSE(retry_replaces(first, retry));
+  EXPECT_FALSE(retry_replaces(first, retry, true));
 }
 
 TEST(Refiner, APlainModelGetsNoColourTermUnlessAskedAndTheResultSaysWhichTermsWereUsed) {

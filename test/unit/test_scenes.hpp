@@ -6,9 +6,22 @@
 #include <cmath>
 
 #include "diffdope/procedural.hpp"
+#include "diffdope/refiner.hpp"
 #include "diffdope/renderer.hpp"
 
 namespace diffdope::test {
+
+/// Options under which a refinement leaves its start as it was until the Newton steps (one iteration at a
+/// negligible rate; no coarse phase, polish or retry): what the steps and the print alignment do on their own.
+inline RefinerOptions steps_only_options() {
+  RefinerOptions o;
+  o.iterations = 1;
+  o.lr_low = o.lr_high = 1e-9;
+  o.coarse_fraction = 0;
+  o.retry_turn = 0;
+  o.polish_iterations = 0;
+  return o;
+}
 
 inline Camera test_camera() { return Camera(300.0, 300.0, 159.5, 119.5, 320, 240); }
 

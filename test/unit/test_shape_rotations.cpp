@@ -12,6 +12,7 @@
 #include "diffdope/renderer.hpp"
 #include "diffdope/synthetic.hpp"
 #include "labelled_can.hpp"
+#include "test_scenes.hpp"
 #include "refine/refine_run.hpp"
 
 using namespace diffdope;
@@ -121,6 +122,28 @@ TEST(ShapeRotations, RevolutionAxesAreTheCylindersAxisAndNoneOfABox) {
   const Mesh box = make_box(Eigen::Vector3d(0.16, 0.06, 0.21), make_pattern_texture(64, 1));
   EXPECT_TRUE(revolution_axes(analyse_shape_rotations(box), 0.01).empty());  // half turns only
   EXPECT_TRUE(revolution_axes(analyse_shape_rotations(can), 0.0).empty());   // off
+}
+
+TEST(Refiner, ThePrintIsAlignedAgainOnceTheNewtonStepsHaveConverged) {
+  // The labelled can 12 degrees off about its axis, 3 cm too far and 2.5 cm aside, with next to no descent (one
+  // iteration at a negligible rate): the first alignment compares turns of a label drawn too small and out of
+  // place, and its best turn is refused (the print registers neither there nor at the result). The Newton
+  // steps then bring the can to its silhouette and depth (and, blind about the axis without the colour term,
+  // turn it further), and the alignment, run again there, turns it to the label.
+  const test::LabelledCan s = test::labelled_can();
+  Pose start = s.truth * test::about_can_axis(12);
+  start.t += Eigen::Vector3d(0.025, 0.0, 0.03);
+  RefinerOptions o = test::steps_only_options();
+  o.batch_size = 8;
+  o.image_scale = 1.0;
+  o.loss.weight_rgb = 0;
+  o.newton_rounds = 8;
+  const RefineResult r = Refiner(o).refine(s.cam, s.obs, s.can, start);
+  EXPECT_GE(r.newton_steps, 3);
+  EXPECT_GT(degrees(r.print_turn), 10.0);
+  EXPECT_LE(r.evaluations, planned_evaluations(o));  // both alignments and both rounds of steps within the plan
+  EXPECT_LT(angle_between(r.pose.R, s.truth.R), 1.5);
+  EXPECT_LT((r.pose.t - s.truth.t).norm(), 0.002);
 }
 
 TEST(Refiner, ThePrintAlignmentTurnsAboutTheAxisToTheLabel) {
@@ -378,11 +401,14 @@ TEST(JumpEvidence, AJumpNeedsALowerLossAndEvidenceThatGrowsWithItsAngle) {
   EXPECT_TRUE(jump_is_supported({0.2525, 13.2}, {0.2, 0.2}, half, false));
 }
 
-TEST(JumpEvidence, APrintTurnIsRefusedWhereTheRegistrationFalls) {
-  EXPECT_TRUE(turn_is_supported(6.5, 6.4, true));
-  EXPECT_TRUE(turn_is_supported(2.0, 8.0, true));
-  EXPECT_FALSE(turn_is_supported(6.0, 4.5, true));
-  EXPECT_FALSE(turn_is_supported(6.0, std::nan(""), true));
-  EXPECT_TRUE(turn_is_supported(std::nan(""), 1.0, true));  // nothing measured at the result: nothing to lose
-  EXPECT_TRUE(turn_is_supported(6.0, 1.0, false));         // the print not weighed
+TEST(JumpEvidence, APrintTurnIsRefusedWhereTheRegistrationFallsOrDoesNotRegister) {
+  const double bar = 1.0;  // the verdict's min_print_significance
+  EXPECT_TRUE(turn_is_supported(6.5, 6.4, bar));
+  EXPECT_TRUE(turn_is_supported(2.0, 8.0, bar));
+  EXPECT_FALSE(turn_is_supported(6.0, 4.5, bar));
+  EXPECT_FALSE(turn_is_supported(6.0, std::nan(""), bar));
+  EXPECT_FALSE(turn_is_supported(0.53, -0.32, bar));  // registers at neither: the turn is not the print's doing
+  EXPECT_FALSE(turn_is_supported(0.2, 0.9, bar));     // better, still below the bar
+  EXPECT_TRUE(turn_is_supported(std::nan(""), 1.0, bar));  // nothing measured at the result: nothing to lose
+  EXPECT_TRUE(turn_is_supported(6.0, 1.0, 0.0));           // the print not weighed
 }

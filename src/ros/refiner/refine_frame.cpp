@@ -61,8 +61,11 @@ std::vector<diffdope_ros::RefinedPose> RefinerNodelet::refineAndPublish(const Fr
   const ros::WallTime refine_start = ros::WallTime::now();
   const std::vector<diffdope::RefineResult> results =
       refiner_->refine_all(frame.camera, frame.observation, targets, options);
-  refine_time_.observe(double(diffdope::planned_evaluations(options)) * double(targets.size()),
-                       (ros::WallTime::now() - refine_start).toSec());
+  // The cost per evaluation made (RefineResult::evaluations); estimates use planned_evaluations(), an upper
+  // bound, so they err long.
+  double evaluations = 0;
+  for (const diffdope::RefineResult& r : results) evaluations += double(r.evaluations);
+  refine_time_.observe(evaluations, (ros::WallTime::now() - refine_start).toSec());
   return publishResults(frame, seeds, target_of, seeds_of, results, skipped, start);
 }
 
