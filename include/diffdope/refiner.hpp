@@ -360,9 +360,9 @@ class Refiner {
 /// Hypothesis evaluations (one render + loss + gradient of one pose) that refining one object with `o` costs at
 /// most: the runs of every iteration, less those successive halving drops, the shape scan as for a shape with
 /// the most turns (kMaxShapeTurns; an asymmetric one has none) and its candidate run, the polish, the print
-/// alignment and the Newton steps (each twice: they run again when the steps move far) and the final scoring. An early stop (of the descent, the polish or the Newton
-/// rounds) only lowers it; a retry of a rejected result (retry_turn) doubles it for that object. The unit of
-/// RefineTimeEstimator (refine_time.hpp).
+/// alignment and the Newton steps (each twice: they run again when the steps move far) and the final scoring.
+/// An early stop (of the descent, the polish or the Newton rounds) only lowers it; a retry of a rejected result
+/// (retry_turn) doubles it for that object. The unit of RefineTimeEstimator (refine_time.hpp).
 long planned_evaluations(const RefinerOptions& o);
 
 /// One plain gradient step of the refiner's parametrisation: translation of the object's centre `pivot`

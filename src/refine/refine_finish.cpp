@@ -114,37 +114,28 @@ void RefineRun::newton(Renderer& renderer, RefineResult& res) {
   std::vector<LossValue> v, tried;
   std::vector<Vector6d> gradients(kSecantProbePoses);
   for (int round = 0; round < newton_rounds_ && h > 0; ++round) {
-    const auto give_up = [&] {  // (true: the rounds end)
-      if (h <= first_reach) return true;
-      h *= 0.5;
-      return false;
-    };
     const Eigen::Vector3d pivot = res.pose * pivot_model_;
     evaluate(renderer, secant_probe_poses(res.pose, LinvT, h, pivot), loss_, true, v, true);
-    bool probed = true;
-    for (int k = 0; k < kSecantProbePoses && probed; ++k) {
-      probed = std::isfinite(v[size_t(k)].total);  // (not: a probe left the image)
-      if (probed) gradients[size_t(k)] = gradient_about(v[size_t(k)].gradient, pivot);
-    }
-    if (!probed) {
-      if (give_up()) return;
-      continue;
-    }
+    const bool probed = std::all_of(v.begin(), v.end(), [](const LossValue& x) { return std::isfinite(x.total); });
+    Vector6d step = Vector6d::Zero();  // (zero: a probe left the image, or nothing curves upwards)
     const double trust = 2 * h;
-    const Vector6d step = newton_step(secant_hessian(gradients, Linv, h), Linv * gradients.back(), trust, free);
-    if (step.isZero()) {
-      if (give_up()) return;
-      continue;
+    if (probed) {
+      for (int k = 0; k < kSecantProbePoses; ++k) gradients[size_t(k)] = gradient_about(v[size_t(k)].gradient, pivot);
+      step = newton_step(secant_hessian(gradients, Linv, h), Linv * gradients.back(), trust, free);
     }
     std::vector<Pose> poses;
-    for (const double share : {0.25, 0.5, 1.0}) poses.push_back(twist_about(res.pose, share * (LinvT * step), pivot));
-    evaluate(renderer, poses, loss_, false, tried, true);
     size_t best = 0;
-    for (size_t j = 1; j < poses.size(); ++j)
-      if (std::isfinite(tried[j].total) && !(tried[best].total <= tried[j].total)) best = j;  // (never a non-finite one)
-    const double gain = residuals * (res.loss.total - tried[best].total) / std::max(res.loss.total, 1e-12);
+    double gain = 0;
+    if (!step.isZero()) {
+      for (const double share : {0.25, 0.5, 1.0}) poses.push_back(twist_about(res.pose, share * (LinvT * step), pivot));
+      evaluate(renderer, poses, loss_, false, tried, true);
+      for (size_t j = 1; j < poses.size(); ++j)
+        if (std::isfinite(tried[j].total) && !(tried[best].total <= tried[j].total)) best = j;  // (never a non-finite one)
+      gain = residuals * (res.loss.total - tried[best].total) / std::max(res.loss.total, 1e-12);
+    }
     if (!(gain > kNewtonEvidence)) {
-      if (give_up()) return;
+      if (h <= first_reach) return;
+      h *= 0.5;
       continue;
     }
     res.pose = poses[best];
@@ -274,14 +265,13 @@ void RefineRun::align_result_print(Renderer& renderer, RefineResult& res, Result
   const double angle = Eigen::AngleAxisd(res.pose.R.transpose() * aligned.R).angle();
   // The turns of several axes together may cost no more than one may (kPrintLossTolerance), and the print's
   // registration must not contradict the turn, and must register where it turned (turn_is_supported).
+  if (!(v[0].total <= (1.0 + kPrintLossTolerance) * res.loss.total)) return;
   const double z_aligned = print_significance(renderer, aligned);
-  if (v[0].total <= (1.0 + kPrintLossTolerance) * res.loss.total &&
-      turn_is_supported(print.at(renderer, res), z_aligned, options_.min_print_significance)) {
-    res.print_turn += angle;
-    res.pose = aligned;
-    res.loss = v[0];
-    print.z = z_aligned, print.known = true;
-  }
+  if (!turn_is_supported(print.at(renderer, res), z_aligned, options_.min_print_significance)) return;
+  res.print_turn += angle;
+  res.pose = aligned;
+  res.loss = v[0];
+  print.z = z_aligned, print.known = true;
 }
 
 int RefineRun::score_views(Renderer& renderer, RefineResult& res) const {
