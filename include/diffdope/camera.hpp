@@ -25,6 +25,8 @@ struct Camera {
 
   /// Pixel position of a camera-frame point (z > 0).
   Eigen::Vector2d project(const Eigen::Vector3d& X) const { return {fx * X.x() / X.z() + cx, fy * X.y() / X.z() + cy}; }
+  /// The camera-frame point that pixel centre (x, y) shows at depth z.
+  Eigen::Vector3d back_project(double x, double y, double z) const { return {(x - cx) * z / fx, (y - cy) * z / fy, z}; }
   /// Pixel bounding box of `points` (camera frame, e.g. a model's box corners moved by its pose); empty when a
   /// point is not beyond `min_z` metres (the projection of such a set is unbounded).
   Eigen::AlignedBox2d project_bounds(const std::vector<Eigen::Vector3d>& points, double min_z) const;

@@ -14,24 +14,30 @@ struct Observation {
   cv::Mat edges;  // CV_32FC1 in [0, 1], observed edge map (see observed_edges()); empty = no edge term
   /// CV_32FC2: Sobel x and y of log(grey + epsilon) of rgb (observed_texture()); empty = no texture term.
   cv::Mat texture;
+  /// A detector's 2D box around the object (pixels of these images), used only without a mask: it bounds where
+  /// the object's pixels are sought and nothing more (a box is not a silhouette). Empty = none.
+  cv::Rect box;
 
   bool has_rgb() const { return !rgb.empty(); }
   bool has_depth() const { return !depth.empty(); }
   bool has_mask() const { return !mask.empty(); }
   bool has_edges() const { return !edges.empty(); }
   bool has_texture() const { return !texture.empty(); }
+  bool has_box() const { return !box.empty(); }
 
-  /// Throws std::invalid_argument naming the image and the problem (type, size mismatch with the camera).
+  /// Throws std::invalid_argument naming the image and the problem (type, size mismatch with the camera, a box
+  /// outside the image).
   void validate(const Camera& camera) const;
 
   /// Resized copy for `scaled_camera`: colour and mask area-averaged (the mask becomes fractional at its
   /// border), depth averaged over the valid readings of each block (blocks less than half measured: no reading).
-  /// The texture gradients are not carried over (they depend on the scale): compute them again.
+  /// The texture gradients are not carried over (they depend on the scale): compute them again. The box is
+  /// scaled, rounded outwards.
   Observation resized(const Camera& scaled_camera) const;
 
   /// One object's observation in a frame: the frame's rgb, depth, edges and texture (shared, not copied) with
-  /// `object_mask` as its mask (empty: none).
-  Observation with_mask(const cv::Mat& object_mask) const;
+  /// `object_mask` as its mask (empty: none) and `object_box` as its box (empty: none).
+  Observation with_mask(const cv::Mat& object_mask, const cv::Rect& object_box = cv::Rect()) const;
 };
 
 /// The paper's observed edge map: Canny edges of the grey image (thresholds `low`, `high` on 8-bit grey),
@@ -50,5 +56,7 @@ cv::Mat to_rgb_float(const cv::Mat& image, bool bgr, const std::string& what = "
 cv::Mat to_depth_metres(const cv::Mat& depth, double metres_per_unit, const std::string& what = "depth");
 /// Converts a mask: 8U/16U (nonzero = object) or 32F (clamped to [0, 1]).
 cv::Mat to_mask_float(const cv::Mat& mask, const std::string& what = "mask");
+/// `box` (pixels of an image `from` wide and high) in an image resized to `to`, rounded outwards.
+cv::Rect scaled_box(const cv::Rect& box, const cv::Size& from, const cv::Size& to);
 
 }  // namespace diffdope

@@ -116,12 +116,19 @@ struct RefinerOptions {
   /// so far). Less than half the work; the winner almost never comes from a dropped half (docs/benchmarks.md).
   /// false = the paper's algorithm exactly (every run goes to the end).
   bool successive_halving = true;
-  /// Without an observed mask, the loss looks at the initial pose's projected bounding box grown by this
-  /// fraction of its size on every side (the object is assumed to stay inside that window).
+  /// Without an observed mask: how far the object may be from its start, as a fraction of its size. With depth
+  /// (derive_mask), its pixels are sought this many diameters around its render at the start; otherwise the loss
+  /// looks at the initial pose's projected bounding box grown by this fraction of its size on every side.
   double no_mask_window = 0.3;  // [0, 10]
+  /// Without an observed mask but with depth: the object's pixels are derived (derive_object_pixels(): depth
+  /// near its render, less what stands in front and the surfaces it stands among) at the start, when the fine
+  /// phase begins and at the chosen result, each time nearer (no_mask_window diameters, a third of that, then
+  /// inlier_threshold), and the loss, the polish, the Newton steps and the verdict use them as the mask. false:
+  /// the window alone (a table or a neighbour inside it then pulls the render onto itself).
+  bool derive_mask = true;
   /// Quality: a depth reading within this distance (metres) of the render is an inlier.
   double inlier_threshold = 0.01;  // (0, 10]
-  /// Verdict thresholds (verdict.hpp): plausible when mask IoU >= min_mask_iou (if a mask was given), the depth
+  /// Verdict thresholds (verdict.hpp): plausible when mask IoU >= min_mask_iou (if a mask was given or derived), the depth
   /// inlier fraction >= min_depth_inliers (if depth was given) and the print lines up with the image's at least
   /// min_print_significance standard deviations above its chance level (if the model has a print and rgb was
   /// given; 0 = not weighed, neither here nor in the shape scan's and print alignment's choices). The verdict asks
@@ -207,12 +214,14 @@ struct RefineResult {
                                       // gradient; a retry's included): what planned_evaluations() bounds
   // Quality scores at the refined pose (at the refiner's image scale).
   double mask_iou = -1;               // IoU of rendered and observed masks (with depth, the render less where the
-                                      // observed depth shows an occluder in front: loss.occlusion_margin); -1
-                                      // without a mask
-  double depth_inliers = -1;          // fraction of object pixels (observed mask, else the render's) with a depth
+                                      // observed depth shows an occluder in front: loss.occlusion_margin);
+                                      // without a mask, against the pixels derived (derive_mask); -1 with neither
+  double depth_inliers = -1;          // fraction of object pixels (observed or derived mask, else the render's) with a depth
                                       // reading within inlier_threshold of the render; -1 without depth
   bool converged = false;             // the winner's loss stopped improving (relative change < 1 % over the last 10 %)
   bool plausible = false;             // every available score passes its threshold in RefinerOptions
+  bool judged = false;                // some score could judge the pose (not so: colour alone without a mask, on
+                                      // a model without print; plausible is then false)
   double confidence = 0;              // [0, 1], the weakest score, 0.5 at its threshold (verdict.hpp)
   PrintRegistration print;            // whether the print lines up at the refined pose (ncc = -1: not measured)
   PoseCurvature curvature;            // the loss around the refined pose (valid = false when not probed:
@@ -250,6 +259,7 @@ struct ObjectTarget {
   /// (retry_turn), polish nor Newton steps, and the print alignment searches only +-kTrackedPrintSearch
   /// (print_alignment.hpp).
   bool explore = true;
+  cv::Rect box;  // without a mask: a detector's 2D box around it (Observation::box); may be empty
 };
 
 class RefineRun;  // (src/refine/refine_run.hpp)

@@ -47,9 +47,12 @@ struct VerdictEvidence {
 
 struct Verdict {
   /// In [0, 1]: the weakest of the evidence's scores, each 0.5 at its threshold (1 = perfect: IoU or inlier
-  /// fraction 1; a print significance far above its threshold, z / (z + threshold)). 0.5 without evidence.
-  double confidence = 0.5;
-  bool plausible = true;  // every available evidence passes its threshold
+  /// fraction 1; a print significance far above its threshold, z / (z + threshold)). 0 without evidence.
+  double confidence = 0;
+  /// Some evidence was weighed. Without any (colour alone, no mask, a model without print) nothing can judge
+  /// the pose, and it is not called plausible.
+  bool judged = false;
+  bool plausible = false;  // judged, and every available evidence passes its threshold
 };
 
 /// Standard deviations above its chance level at which a print's registration is clear evidence on its own: the

@@ -39,6 +39,11 @@ void Observation::validate(const Camera& camera) const {
   if (has_texture() && texture.type() != CV_32FC2)
     throw std::invalid_argument("texture: expected CV_32FC2 (observed_texture()), got " + type_name(texture));
   check_size(texture, camera, "texture");
+  if (box.width < 0 || box.height < 0 || (has_box() && (box & cv::Rect(0, 0, camera.width, camera.height)).empty()))
+    throw std::invalid_argument("box: [" + std::to_string(box.x) + ", " + std::to_string(box.y) + ", " +
+                                std::to_string(box.width) + ", " + std::to_string(box.height) +
+                                "] (x, y, width, height) does not overlap the " + std::to_string(camera.width) + "x" +
+                                std::to_string(camera.height) + " image");
   for (const cv::Mat* m : {&rgb, &depth, &mask, &edges, &texture})
     if (!m->empty() && !m->isContinuous())
       throw std::invalid_argument("observation images must be continuous in memory (clone() a sub-image)");
@@ -50,6 +55,11 @@ Observation Observation::resized(const Camera& cam) const {
   // depth averages only the valid readings of each block.
   Observation out;
   const cv::Size size(cam.width, cam.height);
+  if (has_box()) {
+    const cv::Mat* any = has_rgb() ? &rgb : has_depth() ? &depth : has_mask() ? &mask : nullptr;
+    if (!any) throw std::invalid_argument("Observation::resized: a box without an image to give its size");
+    out.box = scaled_box(box, any->size(), size);
+  }
   if (has_rgb()) cv::resize(rgb, out.rgb, size, 0, 0, cv::INTER_AREA);
   if (has_mask()) cv::resize(mask, out.mask, size, 0, 0, cv::INTER_AREA);
   if (has_edges()) cv::resize(edges, out.edges, size, 0, 0, cv::INTER_AREA);
@@ -67,10 +77,19 @@ Observation Observation::resized(const Camera& cam) const {
   return out;
 }
 
-Observation Observation::with_mask(const cv::Mat& object_mask) const {
+Observation Observation::with_mask(const cv::Mat& object_mask, const cv::Rect& object_box) const {
   Observation out = *this;
   out.mask = object_mask;
+  out.box = object_box;
   return out;
+}
+
+cv::Rect scaled_box(const cv::Rect& box, const cv::Size& from, const cv::Size& to) {
+  if (box.empty() || from.width <= 0 || from.height <= 0) return cv::Rect();
+  const double sx = double(to.width) / from.width, sy = double(to.height) / from.height;
+  const cv::Point a(int(std::floor(box.x * sx)), int(std::floor(box.y * sy)));
+  const cv::Point b(int(std::ceil((box.x + box.width) * sx)), int(std::ceil((box.y + box.height) * sy)));
+  return cv::Rect(a, b);
 }
 
 cv::Mat observed_edges(const cv::Mat& rgb_float, double low, double high, double sigma) {

@@ -177,6 +177,15 @@ RefineResult RefineRun::finish(Renderer& renderer) {
   if (switch_at_ > 0) weigh_starts(renderer, res);
   ResultPrint print{*this};
   weigh_candidate(renderer, res, print);
+  if (derives_pixels_ && std::isfinite(res.loss.total) &&
+      derive_pixels(renderer, {res.pose}, options_.inlier_threshold)) {
+    // The object's pixels about the chosen result, within what the verdict calls an inlier: the polish, the
+    // print alignment, the Newton steps and the scores weigh them.
+    std::vector<LossValue> v;
+    evaluate(renderer, {res.pose}, loss_, false, v, true);
+    res.loss = v[0];
+    print.known = false;
+  }
   const Pose before_polish = res.pose;
   polish(renderer, res);
   if (!(res.pose.R == before_polish.R && res.pose.t == before_polish.t)) print.known = false;  // measured elsewhere
@@ -352,6 +361,7 @@ void RefineRun::judge_result(Renderer& renderer, RefineResult& res, int rendered
   // A continuous declared symmetry turns the print with the object: it cannot be registered along that axis.
   if (one_view && mesh0.symmetry.continuous.empty()) evidence.print_significance = res.print.significance();
   const Verdict verdict = judge(evidence, o.min_mask_iou, o.min_depth_inliers, o.min_print_significance);
+  res.judged = verdict.judged;
   res.plausible = std::isfinite(res.loss.total) && verdict.plausible;
   res.confidence = std::isfinite(res.loss.total) ? verdict.confidence : 0.0;
   res.time_ms = milliseconds_since(start_time_);

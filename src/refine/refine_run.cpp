@@ -11,6 +11,7 @@
 #include <sstream>
 #include <stdexcept>
 
+#include "diffdope/object_pixels.hpp"
 #include "diffdope/print_alignment.hpp"
 #include "refine/refine_schedule.hpp"
 
@@ -28,6 +29,14 @@ cv::Mat window_mask(const Camera& cam, const Mesh& mesh, const Pose& pose, doubl
                    cv::Point(int(std::ceil(b.max().x() + g.x())) + 1, int(std::ceil(b.max().y() + g.y())) + 1));
   m(r & cv::Rect(0, 0, cam.width, cam.height)).setTo(1.0);
   return m;
+}
+
+/// Where a detector's box lets the object's pixels be: the box grown by kBoxSlack of its size on every side, and
+/// by a pixel (a detector's box is seldom exact to the pixel; at a coarser scale its rounding grows it too).
+constexpr double kBoxSlack = 0.05;
+cv::Rect search_box(const cv::Rect& box) {
+  const int gx = int(std::ceil(kBoxSlack * box.width)) + 1, gy = int(std::ceil(kBoxSlack * box.height)) + 1;
+  return cv::Rect(box.x - gx, box.y - gy, box.width + 2 * gx, box.height + 2 * gy);
 }
 
 /// An initial pose whose object is outside the image, or projects smaller than a couple of pixels at the
@@ -63,7 +72,7 @@ RefineRun::RefineRun(const RefinerOptions& o, const std::vector<RefineView>& vie
   if (views.empty()) throw std::invalid_argument("refine: no view");
   if (views.size() > 1 && (scaled_frame || coarse_frame)) throw std::logic_error("RefineRun: shared frames of one view");
   if (initials.empty()) throw std::invalid_argument("refine: no initial pose");
-  has_mask_ = views.front().observed.has_mask();
+  const bool given_mask = views.front().observed.has_mask();
   for (size_t v = 0; v < views.size(); ++v) {
     const RefineView& view = views[v];
     const std::string which = views.size() > 1 ? " (view " + std::to_string(v) + ")" : "";
@@ -71,7 +80,7 @@ RefineRun::RefineRun(const RefinerOptions& o, const std::vector<RefineView>& vie
     view.observed.validate(view.camera);
     if (!view.observed.has_rgb() && !view.observed.has_depth())
       throw std::invalid_argument("refine: need at least an rgb or a depth image" + which);
-    if (view.observed.has_mask() != has_mask_)
+    if (view.observed.has_mask() != given_mask)
       throw std::invalid_argument("refine: either every view has a mask or none" + which);
     meshes_.push_back(view.mesh);
     for (const Pose& initial : initials) {
@@ -100,7 +109,9 @@ RefineRun::RefineRun(const RefinerOptions& o, const std::vector<RefineView>& vie
     l.cam = scaled_camera(view.camera, scale);
     if (shared) {
       const Observation own = Observation().with_mask(observed.mask);
-      l.obs = shared->with_mask(scale == 1.0 ? own.mask : own.resized(l.cam).mask);
+      l.obs = shared->with_mask(scale == 1.0 ? own.mask : own.resized(l.cam).mask,
+                                scaled_box(observed.box, cv::Size(view.camera.width, view.camera.height),
+                                           cv::Size(l.cam.width, l.cam.height)));
     } else {
       l.obs = scale == 1.0 ? observed : observed.resized(l.cam);
     }
@@ -108,7 +119,10 @@ RefineRun::RefineRun(const RefinerOptions& o, const std::vector<RefineView>& vie
     if (loss_.weight_edges > 0 && l.obs.has_rgb() && !l.obs.has_edges()) l.obs.edges = observed_edges(l.obs.rgb);
     if (uses_texture(o, fine) && l.obs.has_rgb() && !l.obs.has_texture())
       l.obs.texture = observed_texture(l.obs.rgb, loss_.texture_epsilon);
-    if (!l.obs.has_mask()) {
+    if (!l.obs.has_mask() && l.obs.has_box()) {
+      l.obs.mask = cv::Mat::zeros(l.cam.height, l.cam.width, CV_32F);
+      l.obs.mask(search_box(l.obs.box) & cv::Rect(0, 0, l.cam.width, l.cam.height)).setTo(1.0);
+    } else if (!l.obs.has_mask()) {
       l.obs.mask = window_mask(l.cam, mesh, initial, o.no_mask_window);
       for (int j = 1; j < starts; ++j) l.obs.mask = cv::max(l.obs.mask, window_mask(l.cam, mesh, initials[j], o.no_mask_window));
     }
@@ -117,13 +131,19 @@ RefineRun::RefineRun(const RefinerOptions& o, const std::vector<RefineView>& vie
   switch_at_ = coarse_iterations(o);
   for (const RefineView& view : views) {
     fine_.push_back(make_level(view, o.image_scale, scaled_frame, true));
-    if (has_mask_ && cv::countNonZero(fine_.back().obs.mask > 0) == 0)
+    if (given_mask && cv::countNonZero(fine_.back().obs.mask > 0) == 0)
       throw std::invalid_argument(views.size() > 1 ? "refine: the object mask of view " +
                                                          std::to_string(fine_.size() - 1) + " is empty"
                                                    : "refine: the object mask is empty");
     if (switch_at_ > 0) coarse_.push_back(make_level(view, o.image_scale * o.coarse_scale, coarse_frame, false));
   }
-  if (!has_mask_) loss_.weight_mask = 0;  // the window is not an observation of the silhouette
+  // Without a mask the object's pixels are derived from depth (one view), or the window stands in for them, which
+  // is not an observation of the silhouette.
+  derives_pixels_ = !given_mask && o.derive_mask && views.size() == 1 && views.front().observed.has_depth();
+  has_mask_ = given_mask || derives_pixels_;
+  rederive_at_ = switch_at_ > 0 ? switch_at_ : o.iterations / 2;
+  if (!has_mask_) loss_.weight_mask = 0;
+  if (derives_pixels_) loss_.weight_mask *= kDerivedMaskWeight;
   bool all_plain = true, any_depth = false, any_rgb = false;
   for (const RefineView& view : views) {
     all_plain = all_plain && view.mesh->plain();
@@ -168,6 +188,53 @@ RefineRun::RefineRun(const RefinerOptions& o, const std::vector<RefineView>& vie
   best_overall_ = std::numeric_limits<double>::infinity();
 }
 
+cv::Mat RefineRun::object_pixels_about(Renderer& renderer, const std::vector<Pose>& poses, double margin) const {
+  const Level& fine = fine_.front();
+  ObjectPixelsOptions po;
+  po.margin = std::min(margin, 1.0);
+  po.surface_search = std::min(0.5 * diameter_, 1.0);  // the object's surroundings, at its own scale
+  po.touching_render = true;
+  po.holes_from_colour = true;
+  if (fine.obs.has_box()) po.bounds = search_box(fine.obs.box);
+  evaluations_ += long(poses.size());
+  return derive_object_pixels(fine.cam, fine.obs.depth, renderer.render(fine.cam, mesh(), poses, cv::Mat()), po,
+                              fine.obs.rgb);
+}
+
+bool RefineRun::derive_pixels(Renderer& renderer, const std::vector<Pose>& poses, double margin) {
+  const cv::Mat pixels = object_pixels_about(renderer, poses, margin);
+  if (cv::countNonZero(pixels >= 0.5f) == 0) return false;
+  Level& fine = fine_.front();
+  fine.obs.mask = pixels;
+  if (!coarse_.empty()) {
+    Level& coarse = coarse_.front();
+    cv::resize(pixels, coarse.obs.mask, cv::Size(coarse.cam.width, coarse.cam.height), 0, 0, cv::INTER_AREA);
+  }
+  pixels_changed_ = true;
+  return true;
+}
+
+void RefineRun::update_object_pixels(Renderer& renderer) {
+  if (!derives_pixels_ || done_) return;
+  const double reach = options_.no_mask_window * diameter_;
+  if (derivations_ == 0) {
+    ++derivations_;
+    if (derive_pixels(renderer, initials_, std::max(reach, options_.inlier_threshold))) return;
+    // Nothing near the starts in depth: the window stays, and it is no observation of the silhouette.
+    derives_pixels_ = has_mask_ = false;
+    loss_.weight_mask = scan_loss_.weight_mask = res_.loss_used.weight_mask = 0;
+  } else if (derivations_ == 1 && k_ == rederive_at_ && k_ > 0) {
+    ++derivations_;
+    // The runs most likely to survive the halving at this iteration: the better half, by their best loss.
+    std::vector<int> runs = active_;
+    std::stable_sort(runs.begin(), runs.end(), [&](int a, int b) { return best_[a].total < best_[b].total; });
+    runs.resize(std::min<size_t>(runs.size(), std::max<size_t>(1, (runs.size() + 1) / 2)));
+    std::vector<Pose> poses;
+    for (int i : runs) poses.push_back(poses_[size_t(i)]);
+    derive_pixels(renderer, poses, std::max(reach / 3, options_.inlier_threshold));
+  }
+}
+
 void RefineRun::evaluate(Renderer& renderer, const std::vector<Pose>& poses, const LossOptions& loss,
                          bool with_gradient, std::vector<LossValue>& out, bool fine) {
   const auto level = [&](size_t v) -> const Level& { return fine || !coarse() ? fine_[v] : coarse_[v]; };
@@ -210,12 +277,13 @@ const std::vector<Pose>& RefineRun::batch() {
     active_ = kept;
     std::sort(active_.begin(), active_.end());
   }
-  if (k_ == switch_at_ && switch_at_ > 0) {
-    // The fine phase begins: losses at the coarse scale do not compare with fine ones, so each run's best is
-    // sought again from here.
+  if ((k_ == switch_at_ && switch_at_ > 0) || pixels_changed_) {
+    // The fine phase begins, or the object's pixels were derived again: losses at the coarse scale, or under the
+    // previous pixels, do not compare with these, so each run's best is sought again from here.
     for (LossValue& b : best_) b.total = std::numeric_limits<double>::infinity();
     best_overall_ = std::numeric_limits<double>::infinity();
     stale_ = 0;
+    pixels_changed_ = false;
   }
   if (k_ == scan_at_ && !scanned_ && !last) {  // every run turned by every shape turn (itself first)
     scanning_ = true;

@@ -192,6 +192,7 @@ RefineResult Refiner::refine_views(const std::vector<RefineView>& views, const s
 RefineResult Refiner::drive(RefineRun& run) {
   std::vector<LossValue> values;
   while (!run.done()) {
+    run.update_object_pixels(*renderer_);
     const std::vector<Pose>& poses = run.batch();  // (before with_gradient() and loss(): a scan differs)
     run.evaluate(*renderer_, poses, run.loss(), run.with_gradient(), values);
     run.absorb(values, on_iteration);
@@ -305,7 +306,7 @@ std::vector<RefineResult> Refiner::refine_all_once(const RefinerOptions& options
     try {
       if (!t.mesh) throw std::invalid_argument("no mesh");
       const Observation o =
-          frame.with_mask(t.mask.empty() || t.mask.type() == CV_32FC1 ? t.mask : to_mask_float(t.mask));
+          frame.with_mask(t.mask.empty() || t.mask.type() == CV_32FC1 ? t.mask : to_mask_float(t.mask), t.box);
       runs[k] = std::make_unique<RefineRun>(options, camera, o, *t.mesh, starts_of(t),
                                             shape_turns(options, *t.mesh, t.explore),
                                             shared_frame ? &*shared_frame : nullptr,
@@ -334,6 +335,12 @@ std::vector<RefineResult> Refiner::refine_all_once(const RefinerOptions& options
       for (size_t k = 0; k < runs.size(); ++k) {
         if (!runs[k] || runs[k]->done() || runs[k]->coarse() != coarse) continue;
         RefineRun& r = *runs[k];
+        try {
+          r.update_object_pixels(*renderer_);
+        } catch (const std::exception& e) {
+          fail(k, e.what());
+          continue;
+        }
         ObjectBatch b;
         b.mesh = &r.mesh();
         b.mask = r.observation().mask;

@@ -82,9 +82,10 @@ double fraction_score(double x, double t) {
 Verdict judge(const VerdictEvidence& e, double min_mask_iou, double min_depth_inliers, double min_print_significance) {
   Verdict v;
   double weakest = std::numeric_limits<double>::infinity();
+  bool passes = true;
   const auto weigh = [&](double score, bool pass) {
     weakest = std::min(weakest, score);
-    v.plausible = v.plausible && pass;
+    passes = passes && pass;
   };
   const bool print_weighed = std::isfinite(e.print_significance) && min_print_significance > 0;
   const double z = e.print_significance;
@@ -99,7 +100,9 @@ Verdict judge(const VerdictEvidence& e, double min_mask_iou, double min_depth_in
   if (e.depth_inliers >= 0)
     weigh(fraction_score(e.depth_inliers, raised(min_depth_inliers)), e.depth_inliers >= raised(min_depth_inliers));
   if (print_weighed) weigh(z > 0 ? z / (z + min_print_significance) : 0.0, z >= min_print_significance);
-  if (std::isfinite(weakest)) v.confidence = weakest;
+  v.judged = std::isfinite(weakest);
+  v.plausible = v.judged && passes;
+  if (v.judged) v.confidence = weakest;
   return v;
 }
 

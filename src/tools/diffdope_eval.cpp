@@ -1,6 +1,7 @@
 // diffdope_eval: the paper's evaluation protocol on a BOP-format dataset.
 //   diffdope_eval --bop ROOT --split NAME --perturbations DIR --out results.jsonl [--levels easy,medium,hard]
 //                 [--config FILE] [--summary-json FILE] [--threads N] [--max-samples N] [--generate N [--seed S]]
+//                 [--masks given|none|box]
 // --generate N first writes perturbation files into DIR with the paper's rule (random axis, rotate by exactly
 // the angle; random direction, translate by exactly the distance): easy (1 deg, 1 mm), medium (10 deg, 10 mm),
 // hard (40 deg, 20 mm), N samples per level for every ground-truth instance of image 0 of each scene.
@@ -25,6 +26,7 @@
 #include "diffdope/metrics.hpp"
 #include "diffdope/refiner.hpp"
 #include "diffdope/synthetic.hpp"
+#include <opencv2/imgproc.hpp>
 #include <random>
 
 using namespace diffdope;
@@ -37,6 +39,8 @@ int usage(int rc) {
                "                     [--levels easy,medium,hard] [--config FILE] [--summary-json FILE]\n"
                "                     [--threads N] [--max-samples N] [--generate N [--seed S]] [--device auto|cpu|cuda]\n"
                "                     [--symmetric ID,ID,...|none]  (instead of ROOT/models/models_info.json)\n"
+               "                     [--masks given|none|box]  given: the visible masks (default); none: no mask, as\n"
+               "                     beside DOPE; box: only the visible mask's bounding rectangle, as a 2D detector's\n"
                "Exit status: 0 all samples evaluated, 1 an error or some samples skipped, 2 bad arguments.\n";
   return rc;
 }
@@ -110,10 +114,22 @@ int write_perturbations(BopDataset& data, const std::string& dir, int samples, u
   return skipped;
 }
 
+/// --masks: what of the visible mask the refiner is given. "box": its bounding rectangle, as a 2D detector gives
+/// it (an error when the scene has no mask to take it from); "none": nothing.
+void apply_mask_mode(Observation& obs, const std::string& mode) {
+  if (mode == "given") return;
+  if (mode == "box") {
+    if (!obs.has_mask()) throw std::runtime_error("--masks box: the scene has no visible mask to take the box from");
+    cv::Mat on = obs.mask >= 0.5f;
+    obs.box = cv::boundingRect(on);
+  }
+  obs.mask = cv::Mat();
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
-  std::string root, split, pert_dir, out_path, config, summary_path, device, symmetric_arg;
+  std::string root, split, pert_dir, out_path, config, summary_path, device, symmetric_arg, masks = "given";
   std::set<std::string> levels;
   int threads = 0, max_samples = -1, generate = 0;
   uint64_t seed = 1;
@@ -138,6 +154,11 @@ int main(int argc, char** argv) {
     else if (a == "--generate") generate = int(parse_integer_arg(a, v, 0, 100000));
     else if (a == "--seed") seed = uint64_t(parse_integer_arg(a, v, 0, std::numeric_limits<long long>::max()));
     else if (a == "--symmetric") symmetric_arg = v;
+    else if (a == "--masks") {
+      if (v != "given" && v != "none" && v != "box")
+        throw std::invalid_argument("--masks: unknown mode '" + v + "' (given, none, box)");
+      masks = v;
+    }
     else if (a == "--levels") {
       std::stringstream ss(v);
       for (std::string l; std::getline(ss, l, ',');) {
@@ -162,7 +183,7 @@ int main(int argc, char** argv) {
     if (!device.empty()) options.device = device;
     options.validate();
     Refiner refiner(options);
-    std::cerr << "diffdope_eval: backend " << refiner.backend() << "\n";
+    std::cerr << "diffdope_eval: backend " << refiner.backend() << ", masks " << masks << "\n";
     std::set<int> symmetric_ids;  // --symmetric: instead of models_info.json
     if (!symmetric_arg.empty() && symmetric_arg != "none") {
       std::stringstream ss(symmetric_arg);
@@ -234,6 +255,7 @@ int main(int argc, char** argv) {
           try {
             mesh_ptr = &data.model(p.obj_id);
             obs = data.observation(img, gt->inst);
+            apply_mask_mode(obs, masks);
           } catch (const std::exception& e) {
             std::cerr << "\ndiffdope_eval: " << file.string() << " sample " << p.sample << ": " << e.what()
                       << "; skipped\n";
@@ -265,7 +287,7 @@ int main(int argc, char** argv) {
                                  {"init_t", {1e3 * p.pose.t.x(), 1e3 * p.pose.t.y(), 1e3 * p.pose.t.z()}},
                                  {"time_ms", r.time_ms}, {"loss", r.loss.total}, {"error_init_mm", 1e3 * e0},
                                  {"error_mm", 1e3 * e1}, {"metric", sym ? "ADD-S" : "ADD"},
-                                 {"mask_iou", r.mask_iou}, {"plausible", r.plausible},
+                                 {"mask_iou", r.mask_iou}, {"plausible", r.plausible}, {"judged", r.judged},
                                  {"winner_lr", r.learning_rates[r.winner]}};
           line["depth_inliers"] = r.depth_inliers;
           line["confidence"] = r.confidence;

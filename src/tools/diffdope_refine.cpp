@@ -1,6 +1,6 @@
 // diffdope_refine: refines the pose of one object in one image, everything read from files.
 //   diffdope_refine --rgb FILE --camera FILE --mesh FILE --init FILE --out DIR [--depth FILE] [--depth-scale M]
-//                   [--mask FILE] [--mesh-scale S] [--config FILE] [--quiet]
+//                   [--mask FILE | --box X,Y,W,H] [--mesh-scale S] [--config FILE] [--quiet]
 // Writes DIR/pose.json (refined pose and scores), DIR/overlay.png (initial pose red, refined green) and
 // DIR/losses.png (loss per iteration of every run, the winner highlighted); prints the pose and the timing.
 // Every unusable input is reported as one line `diffdope_refine: <file>: <problem>` with exit code 1; command-line
@@ -36,7 +36,8 @@ namespace {
 
 const char* kUsage =
     "usage: diffdope_refine --rgb FILE --camera FILE --mesh FILE --init FILE --out DIR\n"
-    "                       [--depth FILE] [--depth-scale M] [--mask FILE] [--mesh-scale S] [--config FILE]\n"
+    "                       [--depth FILE] [--depth-scale M] [--mask FILE | --box X,Y,W,H] [--mesh-scale S]\n"
+    "                       [--config FILE]\n"
     "                       [--device auto|cpu|cuda] [--quiet]\n"
     "       diffdope_refine --print-config [--config FILE] [--device D]\n"
     "\n"
@@ -50,6 +51,8 @@ const char* kUsage =
     "  --depth FILE      depth image, one channel, 16-bit or float\n"
     "  --depth-scale M   metres per depth unit (default 0.001: millimetres)\n"
     "  --mask FILE       object mask, nonzero = object\n"
+    "  --box X,Y,W,H     without a mask: a 2D detector's box around the object (pixels: left, top, width,\n"
+    "                    height); it bounds where the object's pixels are sought, nothing more\n"
     "  --mesh-scale S    metres per model unit (default 1; 0.001 for millimetre models such as BOP's)\n"
     "  --config FILE     refiner options YAML (see config/default.yaml)\n"
     "  --device D        backend: cpu, cuda (error without a GPU) or auto (CUDA if present); overrides --config\n"
@@ -232,6 +235,7 @@ nlohmann::ordered_json pose_json(const RefineResult& r) {
               {"depth_inliers", r.depth_inliers},
               {"converged", r.converged},
               {"plausible", r.plausible},
+              {"judged", r.judged},
               {"retried", r.retried},
               {"confidence", r.confidence},
               {"print_significance", std::isfinite(r.print.significance()) ? nlohmann::json(r.print.significance())
@@ -241,7 +245,7 @@ nlohmann::ordered_json pose_json(const RefineResult& r) {
 }
 
 struct Args {
-  std::string rgb, depth, mask, camera, mesh, init, out, config, device;
+  std::string rgb, depth, mask, camera, mesh, init, out, config, device, box;
   double depth_scale = 0.001, mesh_scale = 1.0;
   bool quiet = false;
   bool print_config = false;
@@ -280,6 +284,7 @@ int parse_args(int argc, char** argv, Args& a) {
     else if (k == "--out") target = &a.out;
     else if (k == "--config") target = &a.config;
     else if (k == "--device") target = &a.device;
+    else if (k == "--box") target = &a.box;
     else if (k == "--depth-scale") num = &a.depth_scale;
     else if (k == "--mesh-scale") num = &a.mesh_scale;
     else return usage_error("unknown option " + k);
@@ -308,6 +313,20 @@ int parse_args(int argc, char** argv, Args& a) {
                                   {"--out", &a.out}})
     if (val->empty()) missing += std::string(missing.empty() ? "" : ", ") + flag;
   if (!missing.empty()) return usage_error("missing " + missing);
+  if (!a.box.empty() && !a.mask.empty()) return usage_error("--box is for refining without a mask: give --mask or --box");
+  if (!a.box.empty()) {
+    std::stringstream ss(a.box);
+    std::vector<long long> v;
+    for (std::string part; std::getline(ss, part, ',');) {
+      try {
+        v.push_back(parse_integer_arg("--box", part, -Camera::kMaxSize, Camera::kMaxSize));
+      } catch (const std::invalid_argument& e) {
+        return usage_error(e.what());
+      }
+    }
+    if (v.size() != 4 || v[2] <= 0 || v[3] <= 0)
+      return usage_error("--box needs X,Y,W,H (pixels; width and height positive), got '" + a.box + "'");
+  }
   return -1;
 }
 
@@ -349,6 +368,13 @@ int run(const Args& a) {
       fail(a.mask, "mask is " + size_str(m.cols, m.rows) + " but the rgb image is " + size_str(W, H));
     obs.mask = about(a.mask, [&] { return to_mask_float(m, a.mask); });
     if (cv::countNonZero(obs.mask > 0) == 0) fail(a.mask, "the mask is empty (no nonzero pixel)");
+  }
+  if (!a.box.empty()) {
+    int x = 0, y = 0, w = 0, h = 0;
+    std::sscanf(a.box.c_str(), "%d,%d,%d,%d", &x, &y, &w, &h);  // (checked by parse_args)
+    obs.box = cv::Rect(x, y, w, h);
+    if ((obs.box & cv::Rect(0, 0, W, H)).empty())
+      fail("--box", "the box " + a.box + " does not overlap the " + size_str(W, H) + " image");
   }
 
   check_file(a.mesh);

@@ -91,7 +91,7 @@ TEST(PoseCovariance, GrowsAboutAPlainCylindersAxis) {
 
 TEST(PoseCovariance, ADepthOnlyRefinementKnowsLessOfItsTurnInTheImagePlane) {
   // An L-block seen by depth alone (no colour, no mask): its turn about the viewing ray shows only at its
-  // outline, against the full observation's print and mask.
+  // outline (in the depth term and the pixels derived from it), against the full observation's print and mask.
   const Camera cam{420, 420, 159.5, 119.5, 320, 240};
   const Mesh block = make_l_block(0.12, make_label_texture(256, 31));
   Vector6d d;
@@ -111,7 +111,7 @@ TEST(PoseCovariance, ADepthOnlyRefinementKnowsLessOfItsTurnInTheImagePlane) {
   ASSERT_TRUE(a.curvature.valid);
   ASSERT_TRUE(b.curvature.valid);
   const Eigen::Vector3d ray = a.pivot.normalized();
-  EXPECT_GT(rotation_std(b.covariance, ray), 1.5 * rotation_std(a.covariance, ray))
+  EXPECT_GT(rotation_std(b.covariance, ray), 1.25 * rotation_std(a.covariance, ray))
       << rotation_std(b.covariance, ray) << " vs " << rotation_std(a.covariance, ray);
 }
 

@@ -311,7 +311,7 @@ TEST(Refiner, WorksWithEachModalityMissing) {
     if (!v.mask) o.mask.release();
     const RefineResult r = Refiner(test_options()).refine(s.cam, o, s.mesh, init);
     EXPECT_LT(add_mm(s, r.pose), 0.5 * before) << v.name;
-    EXPECT_EQ(r.mask_iou < 0, !v.mask) << v.name;
+    EXPECT_EQ(r.mask_iou < 0, !v.mask && !v.depth) << v.name;  // without a mask: against the derived pixels
     EXPECT_EQ(r.depth_inliers < 0, !v.depth) << v.name;
   }
 }
@@ -594,7 +594,10 @@ TEST(Refiner, APlainModelGetsNoColourTermUnlessAskedAndTheResultSaysWhichTermsWe
   EXPECT_EQ(terms(plain, obs), (T{"depth", "mask"}));
   Observation no_mask = obs;
   no_mask.mask = cv::Mat();
-  EXPECT_EQ(terms(plain, no_mask), (T{"depth"}));
+  EXPECT_EQ(terms(plain, no_mask), (T{"depth", "mask"}));  // the pixels derived from depth
+  RefinerOptions window = o;
+  window.derive_mask = false;
+  EXPECT_EQ(used_terms(Refiner(window).refine(cam, no_mask, plain, truth).loss_used), (T{"depth"}));
   Observation rgb_alone = no_mask;
   rgb_alone.depth = cv::Mat();
   EXPECT_EQ(terms(plain, rgb_alone), (T{"rgb"}));  // the only evidence left: kept

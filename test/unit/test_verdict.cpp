@@ -76,10 +76,15 @@ TEST(PrintRegistration, APlainModelOrTooFewPixelsAreNotMeasured) {
 TEST(Verdict, EachEvidenceScoresHalfAtItsThresholdAndTheWeakestDecides) {
   VerdictEvidence e;
   const Verdict none = judge(e, 0.5, 0.5, 3.0);
-  EXPECT_TRUE(none.plausible);
-  EXPECT_DOUBLE_EQ(none.confidence, 0.5);  // no evidence: unknown
+  EXPECT_FALSE(none.judged);  // no evidence: nothing can judge, and the pose is not called plausible
+  EXPECT_FALSE(none.plausible);
+  EXPECT_DOUBLE_EQ(none.confidence, 0.0);
+  e.print_significance = 9.0;
+  EXPECT_FALSE(judge(e, 0.5, 0.5, 0.0).judged);  // a print not weighed is no evidence
+  e.print_significance = std::numeric_limits<double>::quiet_NaN();
   e.mask_iou = 0.5;
   EXPECT_DOUBLE_EQ(judge(e, 0.5, 0.5, 3.0).confidence, 0.5);
+  EXPECT_TRUE(judge(e, 0.5, 0.5, 3.0).judged);
   e.mask_iou = 1.0;
   e.depth_inliers = 0.75;
   EXPECT_DOUBLE_EQ(judge(e, 0.5, 0.5, 3.0).confidence, 0.75);

@@ -1,0 +1,43 @@
+#pragma once
+// The pixels that show an object when no mask is given: observed depth near the object rendered at an estimate,
+// less what stands in front of it and the surfaces it stands on or beside (planes found outside its reach and
+// followed into it). The refiner derives them for an object, again as its estimate improves; the calibrator for a
+// robot. Units: metres; images of the camera's size.
+#include <opencv2/core.hpp>
+#include <vector>
+
+#include "diffdope/camera.hpp"
+#include "diffdope/renderer.hpp"
+
+namespace diffdope {
+
+struct ObjectPixelsOptions {
+  /// How far (metres) the estimate may be from the truth: an observed pixel may be the object's when it lies
+  /// within this distance, projected at the render's nearest depth, of what the render covers, and its depth
+  /// within this of the depth range the render shows there. It must exceed the estimate's error plus the depth
+  /// noise; (0, 1].
+  double margin = 0.02;
+  /// Surfaces beside the object are sought this far (metres) beyond its reach; 0: in the whole image (a robot
+  /// fills much of it). [0, 1]
+  double surface_search = 0;
+  /// Keep only the connected groups of pixels that touch what the render covers: an object is one piece, and
+  /// a neighbour entering the reach elsewhere is not it.
+  bool touching_render = false;
+  /// Where no depth reading says (holes at silhouettes, dark or shiny surfaces) within reach, the colour decides
+  /// when an rgb image is given: the probability of the pixel's colour under the object's colour histogram (from
+  /// the pixels depth gave it) against its surroundings' (the readings near it that are not the object), as
+  /// region-based trackers weigh colour (PWP3D). Without rgb such pixels are not the object's.
+  bool holes_from_colour = false;
+  /// Where the object can be at all (a detector's box), in pixels; empty: anywhere.
+  cv::Rect bounds;
+};
+
+/// The object's pixels (CV_32F in [0, 1]: 1 where depth shows it, a colour probability in holes) in `depth`
+/// (CV_32F metres, 0 = no reading; the camera's size), given renders of it at one or more estimates
+/// (Renderer::render() images of the camera's size; their union is the reach). `rgb` (CV_32FC3 in [0, 1], or
+/// empty) serves holes_from_colour. Throws std::invalid_argument on an empty depth, a size mismatch or a margin
+/// out of range.
+cv::Mat derive_object_pixels(const Camera& camera, const cv::Mat& depth, const std::vector<RenderImage>& renders,
+                             const ObjectPixelsOptions& options, const cv::Mat& rgb = cv::Mat());
+
+}  // namespace diffdope

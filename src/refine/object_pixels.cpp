@@ -1,0 +1,245 @@
+// derive_object_pixels() (object_pixels.hpp): depth near the rendered estimate, less occluders in front and the
+// planes the object stands among.
+#include "diffdope/object_pixels.hpp"
+
+#include <opencv2/imgproc.hpp>
+
+#include <Eigen/Eigenvalues>
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <random>
+#include <stdexcept>
+#include <vector>
+
+namespace diffdope {
+namespace {
+
+struct Plane {
+  Eigen::Vector3d normal;  // unit
+  double offset = 0;       // normal . p + offset = 0
+  double distance(const Eigen::Vector3d& p) const { return std::abs(normal.dot(p) + offset); }
+};
+
+/// Least-squares plane through `points` (the eigenvector of the smallest scatter).
+Plane fit_plane(const std::vector<Eigen::Vector3d>& points) {
+  Eigen::Vector3d mean = Eigen::Vector3d::Zero();
+  for (const auto& p : points) mean += p;
+  mean /= double(points.size());
+  Eigen::Matrix3d scatter = Eigen::Matrix3d::Zero();
+  for (const auto& p : points) scatter += (p - mean) * (p - mean).transpose();
+  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(scatter);
+  Plane plane;
+  plane.normal = eig.eigenvectors().col(0).normalized();
+  plane.offset = -plane.normal.dot(mean);
+  return plane;
+}
+
+/// RANSAC: the plane through three of `points` that the most of them lie within `tolerance` of (hypotheses scored
+/// on at most 8000 of them), refit to its inliers. Deterministic (fixed seed): the same image gives the same
+/// pixels.
+Plane dominant_plane(const std::vector<Eigen::Vector3d>& points, double tolerance, std::mt19937& rng) {
+  std::uniform_int_distribution<size_t> pick(0, points.size() - 1);
+  std::vector<size_t> sample;
+  const size_t n_sample = std::min<size_t>(points.size(), 8000);
+  for (size_t k = 0; k < n_sample; ++k) sample.push_back(pick(rng));
+  Plane best;
+  size_t best_count = 0;
+  for (int h = 0; h < 200; ++h) {
+    const Eigen::Vector3d &a = points[pick(rng)], &b = points[pick(rng)], &c = points[pick(rng)];
+    const Eigen::Vector3d n = (b - a).cross(c - a);
+    if (n.norm() < 1e-9) continue;
+    Plane p{n.normalized(), 0};
+    p.offset = -p.normal.dot(a);
+    size_t count = 0;
+    for (size_t k : sample) count += p.distance(points[k]) <= tolerance;
+    if (count > best_count) best_count = count, best = p;
+  }
+  if (best_count == 0) return best;
+  for (int refit = 0; refit < 2; ++refit) {
+    std::vector<Eigen::Vector3d> inliers;
+    for (const auto& q : points)
+      if (best.distance(q) <= tolerance) inliers.push_back(q);
+    if (inliers.size() < 3) break;
+    best = fit_plane(inliers);
+  }
+  return best;
+}
+
+/// Colour histograms of the object's pixels and of the background's, kColourBins per channel, and in each pixel
+/// of `holes` the probability that its colour is the object's (equal priors; a colour neither histogram holds
+/// counts one in each, so it stays at a half). 16 bins of RGB keep an object's print apart from a table's
+/// grain while a few thousand pixels still fill the bins that matter.
+constexpr int kColourBins = 16;
+void colour_holes(const cv::Mat& rgb, const cv::Mat& object, const cv::Mat& background, const cv::Mat& holes,
+                  cv::Mat& out) {
+  const auto bin = [](const cv::Vec3f& c) {
+    int b = 0;
+    for (int ch = 0; ch < 3; ++ch) b = b * kColourBins + std::clamp(int(c[ch] * kColourBins), 0, kColourBins - 1);
+    return b;
+  };
+  std::vector<double> fg(kColourBins * kColourBins * kColourBins, 1.0), bg(fg.size(), 1.0);
+  double n_fg = double(fg.size()), n_bg = double(bg.size());
+  for (int y = 0; y < rgb.rows; ++y)
+    for (int x = 0; x < rgb.cols; ++x) {
+      if (object.at<uchar>(y, x)) fg[size_t(bin(rgb.at<cv::Vec3f>(y, x)))] += 1, n_fg += 1;
+      else if (background.at<uchar>(y, x)) bg[size_t(bin(rgb.at<cv::Vec3f>(y, x)))] += 1, n_bg += 1;
+    }
+  for (int y = 0; y < rgb.rows; ++y)
+    for (int x = 0; x < rgb.cols; ++x) {
+      if (!holes.at<uchar>(y, x)) continue;
+      const size_t b = size_t(bin(rgb.at<cv::Vec3f>(y, x)));
+      const double pf = fg[b] / n_fg, pb = bg[b] / n_bg;
+      out.at<float>(y, x) = float(pf / (pf + pb));
+    }
+}
+
+int pixels_at(const Camera& camera, double metres, double z) {
+  return std::clamp(int(std::ceil(metres * std::max(camera.fx, camera.fy) / std::max(z, 0.05))), 1, 200);
+}
+
+}  // namespace
+
+cv::Mat derive_object_pixels(const Camera& camera, const cv::Mat& d, const std::vector<RenderImage>& renders,
+                             const ObjectPixelsOptions& options, const cv::Mat& rgb) {
+  const cv::Size size(camera.width, camera.height);
+  if (d.empty() || d.type() != CV_32F) throw std::invalid_argument("derive_object_pixels: no depth image (CV_32F)");
+  if (d.size() != size) throw std::invalid_argument("derive_object_pixels: the depth image is not the camera's size");
+  if (!(options.margin > 0 && options.margin <= 1))
+    throw std::invalid_argument("derive_object_pixels: the margin must be in (0, 1] metres");
+  if (!rgb.empty() && (rgb.type() != CV_32FC3 || rgb.size() != size))
+    throw std::invalid_argument("derive_object_pixels: the rgb image is not CV_32FC3 of the camera's size");
+  if (!(options.surface_search >= 0 && options.surface_search <= 1))
+    throw std::invalid_argument("derive_object_pixels: surface_search must be in [0, 1] metres");
+  const double margin = options.margin;
+  // What each render covers with a depth (a sliver at a silhouette says nothing of the object's depth range).
+  std::vector<cv::Mat> covered;
+  cv::Mat covered_any = cv::Mat::zeros(size, CV_8U);
+  double z_near = std::numeric_limits<double>::infinity();
+  for (const RenderImage& img : renders) {
+    if (img.depth.size() != size || img.coverage.size() != size)
+      throw std::invalid_argument("derive_object_pixels: a render is not the camera's size");
+    covered.push_back((img.coverage >= 0.5f) & (img.depth > 0.0f));
+    covered_any |= covered.back();
+    if (cv::countNonZero(covered.back()) == 0) continue;
+    cv::Mat masked = img.depth.clone();
+    masked.setTo(std::numeric_limits<float>::infinity(), ~covered.back());
+    double z = 0;
+    cv::minMaxLoc(masked, &z);
+    z_near = std::min(z_near, z);
+  }
+  if (cv::countNonZero(covered_any) == 0) return cv::Mat::zeros(size, CV_32F);
+
+  // Within reach: around each render, at the depths it shows there give or take the margin. An occluder in front
+  // of the object, or a wall behind it, lies outside that depth range.
+  const int radius = pixels_at(camera, margin, z_near);
+  const cv::Mat kernel = cv::getStructuringElement(cv::MORPH_RECT, cv::Size(2 * radius + 1, 2 * radius + 1));
+  cv::Mat mask = cv::Mat::zeros(size, CV_8U), within_reach = cv::Mat::zeros(size, CV_8U);
+  for (size_t i = 0; i < renders.size(); ++i) {
+    cv::Mat nearest = renders[i].depth.clone(), farthest = renders[i].depth.clone();
+    nearest.setTo(std::numeric_limits<float>::infinity(), ~covered[i]);
+    farthest.setTo(0.0f, ~covered[i]);
+    cv::erode(nearest, nearest, kernel);     // smallest rendered depth around each pixel
+    cv::dilate(farthest, farthest, kernel);  // largest
+    const cv::Mat reach = farthest > 0;
+    within_reach |= reach;
+    mask |= (d > 0) & (d >= nearest - margin) & (d <= farthest + margin) & reach;
+  }
+
+  // Surfaces beside the object: planes of the depth where the object cannot be, each followed into its reach by
+  // connectivity (a table runs under the object, a box's side continues past it). Their pixels leave the mask
+  // unless a render is there at that depth (the object's foot on the table). A plane must cover 0.5 % of the
+  // image; the RANSAC tolerance (2 cm) admits a sensor's noise at a few metres, and what is removed is what lies
+  // within 3 sigma of the plane's own spread (at least 5 mm).
+  cv::Mat search = ~within_reach, around = cv::Mat(size, CV_8U, cv::Scalar(255));
+  if (options.surface_search > 0) {
+    const int ring = pixels_at(camera, options.surface_search, z_near);
+    cv::dilate(within_reach, around, cv::getStructuringElement(cv::MORPH_RECT, cv::Size(2 * ring + 1, 2 * ring + 1)));
+    search &= around;
+  }
+  // The observed points (camera frame), once; z = 0 where there is no reading.
+  std::vector<Eigen::Vector3d> cloud(size_t(camera.width) * size_t(camera.height), Eigen::Vector3d::Zero());
+  for (int y = 0; y < camera.height; ++y)
+    for (int x = 0; x < camera.width; ++x) {
+      const float z = d.at<float>(y, x);
+      if (z > 0 && std::isfinite(z))
+        cloud[size_t(y) * size_t(camera.width) + size_t(x)] = camera.back_project(x, y, z);
+    }
+  const auto point = [&](int x, int y) -> const Eigen::Vector3d& {
+    return cloud[size_t(y) * size_t(camera.width) + size_t(x)];
+  };
+  std::vector<Eigen::Vector3d> outside;
+  for (int y = 0; y < camera.height; y += 2)
+    for (int x = 0; x < camera.width; x += 2)
+      if (point(x, y).z() > 0 && search.at<uchar>(y, x)) outside.push_back(point(x, y));
+  const size_t min_points = size_t(0.005 * camera.width * camera.height / 4);
+  const double tolerance = 0.02;
+  std::mt19937 rng(1);
+  for (int k = 0; k < 6 && outside.size() >= std::max<size_t>(min_points, 3); ++k) {
+    const Plane plane = dominant_plane(outside, tolerance, rng);
+    std::vector<double> residuals;
+    std::vector<Eigen::Vector3d> rest;
+    for (const auto& p : outside) {
+      const double r = plane.distance(p);
+      if (r <= tolerance) residuals.push_back(r);
+      else rest.push_back(p);
+    }
+    if (residuals.size() < min_points) break;
+    std::nth_element(residuals.begin(), residuals.begin() + long(residuals.size() / 2), residuals.end());
+    const double spread = 1.4826 * residuals[residuals.size() / 2];  // |r| has median 0.674 sigma; MAD of r
+    const double band = std::clamp(3 * spread, 0.005, tolerance);
+    cv::Mat on_plane = cv::Mat::zeros(size, CV_8U);
+    for (int y = 0; y < camera.height; ++y)
+      for (int x = 0; x < camera.width; ++x)
+        if (point(x, y).z() > 0 && plane.distance(point(x, y)) <= band) on_plane.at<uchar>(y, x) = 255;
+    cv::Mat labels;
+    const int n_labels = cv::connectedComponents(on_plane, labels, 8, CV_32S);
+    std::vector<char> reaches_outside(size_t(n_labels), 0);
+    for (int y = 0; y < camera.height; ++y)
+      for (int x = 0; x < camera.width; ++x)
+        if (on_plane.at<uchar>(y, x) && !within_reach.at<uchar>(y, x))
+          reaches_outside[size_t(labels.at<int>(y, x))] = 1;
+    for (int y = 0; y < camera.height; ++y)
+      for (int x = 0; x < camera.width; ++x) {
+        if (!mask.at<uchar>(y, x) || !on_plane.at<uchar>(y, x) || !reaches_outside[size_t(labels.at<int>(y, x))])
+          continue;
+        bool rendered_there = false;
+        for (size_t i = 0; i < renders.size() && !rendered_there; ++i)
+          rendered_there = covered[i].at<uchar>(y, x) &&
+                           std::abs(d.at<float>(y, x) - renders[i].depth.at<float>(y, x)) <= band;
+        if (!rendered_there) mask.at<uchar>(y, x) = 0;
+      }
+    outside.swap(rest);
+  }
+  if (!options.bounds.empty()) {
+    cv::Mat inside = cv::Mat::zeros(size, CV_8U);
+    inside(options.bounds & cv::Rect(cv::Point(0, 0), size)).setTo(255);
+    mask &= inside;
+  }
+  if (options.touching_render) {
+    cv::Mat labels;
+    const int n_labels = cv::connectedComponents(mask, labels, 8, CV_32S);
+    std::vector<char> touches(size_t(n_labels), 0);
+    for (int y = 0; y < camera.height; ++y)
+      for (int x = 0; x < camera.width; ++x)
+        if (mask.at<uchar>(y, x) && covered_any.at<uchar>(y, x)) touches[size_t(labels.at<int>(y, x))] = 1;
+    for (int y = 0; y < camera.height; ++y)
+      for (int x = 0; x < camera.width; ++x)
+        if (mask.at<uchar>(y, x) && !touches[size_t(labels.at<int>(y, x))]) mask.at<uchar>(y, x) = 0;
+  }
+  cv::Mat out;
+  mask.convertTo(out, CV_32F, 1.0 / 255.0);
+  if (options.holes_from_colour && !rgb.empty()) {
+    cv::Mat holes = ~(d > 0) & within_reach;  // (NaN compares false: no reading)
+    if (!options.bounds.empty()) {
+      cv::Mat inside = cv::Mat::zeros(size, CV_8U);
+      inside(options.bounds & cv::Rect(cv::Point(0, 0), size)).setTo(255);
+      holes &= inside;
+    }
+    const cv::Mat background = (d > 0) & around & ~mask;
+    colour_holes(rgb, mask, background, holes, out);
+  }
+  return out;
+}
+
+}  // namespace diffdope

@@ -1,0 +1,135 @@
+// The object's pixels without a mask (derive_object_pixels) and the refiner that derives them, on a generated
+// scene as users have them: the object on a table, a box touching it, a post in front of it, depth noise and holes.
+#include <gtest/gtest.h>
+
+#include <opencv2/imgproc.hpp>
+
+#include "diffdope/device.hpp"
+#include "diffdope/metrics.hpp"
+#include "diffdope/object_pixels.hpp"
+#include "diffdope/primitives.hpp"
+#include "diffdope/procedural.hpp"
+#include "diffdope/refiner.hpp"
+#include "diffdope/synthetic.hpp"
+
+using namespace diffdope;
+
+namespace {
+
+/// Camera-from-world of a camera at `eye` looking at `target`, world z up (OpenCV optical frame).
+Pose look_at(const Eigen::Vector3d& eye, const Eigen::Vector3d& target) {
+  const Eigen::Vector3d z = (target - eye).normalized();
+  const Eigen::Vector3d x = z.cross(Eigen::Vector3d::UnitZ()).normalized();
+  const Eigen::Vector3d y = z.cross(x);
+  Eigen::Matrix3d world_from_camera;
+  world_from_camera << x, y, z;
+  const Eigen::Matrix3d R = world_from_camera.transpose();
+  return Pose(R, -R * eye);
+}
+
+struct ClutteredScene {
+  Camera cam{420, 420, 159.5, 119.5, 320, 240};
+  Mesh object = make_scan_like(ScanShape::Bottle, Eigen::Vector3d(0.07, 0.045, 0.16), 3000, 256, 3);
+  Mesh table = make_box(Eigen::Vector3d(0.6, 0.6, 0.02), make_pattern_texture(256, 5));
+  Mesh neighbour = make_box(Eigen::Vector3d(0.06, 0.06, 0.1), make_label_texture(256, 77));
+  Mesh post = make_box(Eigen::Vector3d(0.025, 0.025, 0.3), make_pattern_texture(64, 9));
+  Pose truth;
+  SyntheticScene scene;
+  Observation obs;  // rgb and depth, no mask
+};
+
+/// The object standing on a table seen from 45 degrees above, a box touching its side and a post between it and
+/// the camera hiding part of it.
+ClutteredScene make_cluttered_scene(uint32_t seed) {
+  ClutteredScene s;
+  const Pose camera_from_world = look_at(Eigen::Vector3d(0.05, -0.38, 0.38), Eigen::Vector3d(0, 0, 0.04));
+  Eigen::Vector3d lo = Eigen::Vector3d::Constant(1e9), hi = -lo;
+  const Pose turned(Eigen::AngleAxisd(0.4, Eigen::Vector3d::UnitZ()).toRotationMatrix(), Eigen::Vector3d::Zero());
+  for (const Eigen::Vector3d& c : s.object.bbox_corners(turned)) lo = lo.cwiseMin(c), hi = hi.cwiseMax(c);
+  const Pose world_from_object(turned.R, Eigen::Vector3d(-0.5 * (lo.x() + hi.x()), -0.5 * (lo.y() + hi.y()), -lo.z()));
+  s.truth = camera_from_world * world_from_object;
+  const Pose table = camera_from_world * Pose(Eigen::Matrix3d::Identity(), Eigen::Vector3d(0, 0, -0.01));
+  const double half_width = 0.5 * (hi.x() - lo.x());
+  const Pose neighbour = camera_from_world * Pose(Eigen::Matrix3d::Identity(), Eigen::Vector3d(half_width + 0.03, 0, 0.05));
+  const Pose post = camera_from_world * Pose(Eigen::Matrix3d::Identity(), Eigen::Vector3d(0.0, -0.12, 0.15));
+  auto renderer = make_cpu_renderer();
+  SyntheticNoise noise;
+  noise.brightness = 0.9;
+  s.scene = synthesize_scene(*renderer, s.cam,
+                             {{&s.object, s.truth}, {&s.table, table}, {&s.neighbour, neighbour}, {&s.post, post}},
+                             noise, seed);
+  s.obs.rgb = s.scene.rgb;
+  s.obs.depth = s.scene.depth;
+  return s;
+}
+
+RefinerOptions test_options() {
+  RefinerOptions o;
+  o.batch_size = 16;
+  o.iterations = 48;
+  o.image_scale = 1.0;  // the test images are already small
+  return o;
+}
+
+double overlap(const cv::Mat& a, const cv::Mat& b) { return cv::countNonZero((a >= 0.5f) & (b >= 0.5f)); }
+
+}  // namespace
+
+// At the true pose, the derived pixels are the object's visible ones: the table under it, the box touching it and
+// the post in front of it are left out.
+TEST(ObjectPixels, LeaveOutTheTableANeighbourAndAnOccluder) {
+  const ClutteredScene s = make_cluttered_scene(3);
+  const cv::Mat& visible = s.scene.visible_masks[0];
+  ASSERT_LT(s.scene.visible_fraction[0], 0.97);  // the post hides part of it
+  auto renderer = make_cpu_renderer();
+  ObjectPixelsOptions po;
+  po.margin = 0.01;
+  po.surface_search = 0.5 * s.object.diameter();
+  po.touching_render = true;
+  po.holes_from_colour = true;
+  const cv::Mat pixels = derive_object_pixels(s.cam, s.obs.depth, renderer->render(s.cam, s.object, {s.truth}), po, s.obs.rgb);
+  const double object = cv::countNonZero(visible >= 0.5f);
+  const double iou = overlap(pixels, visible) / cv::countNonZero((pixels >= 0.5f) | (visible >= 0.5f));
+  EXPECT_GT(iou, 0.9);
+  for (size_t k = 1; k < 4; ++k)
+    EXPECT_LT(overlap(pixels, s.scene.visible_masks[k]), 0.02 * object) << "scene object " << k;
+  // A box bounds the pixels.
+  po.bounds = cv::Rect(0, 0, s.cam.width / 2, s.cam.height);
+  const cv::Mat bounded = derive_object_pixels(s.cam, s.obs.depth, renderer->render(s.cam, s.object, {s.truth}), po, s.obs.rgb);
+  EXPECT_EQ(cv::countNonZero(bounded(cv::Rect(s.cam.width / 2, 0, s.cam.width / 2, s.cam.height)) > 0), 0);
+  EXPECT_GT(cv::countNonZero(bounded > 0), 0);
+}
+
+TEST(ObjectPixels, RefusesWhatItCannotUse) {
+  const Camera cam(420, 420, 159.5, 119.5, 320, 240);
+  ObjectPixelsOptions po;
+  EXPECT_THROW(derive_object_pixels(cam, cv::Mat(), {}, po), std::invalid_argument);
+  EXPECT_THROW(derive_object_pixels(cam, cv::Mat::zeros(10, 10, CV_32F), {}, po), std::invalid_argument);
+  po.margin = 0;
+  EXPECT_THROW(derive_object_pixels(cam, cv::Mat::zeros(240, 320, CV_32F), {}, po), std::invalid_argument);
+  po.margin = 0.01;
+  EXPECT_THROW(derive_object_pixels(cam, cv::Mat::zeros(240, 320, CV_32F), {}, po, cv::Mat::zeros(240, 320, CV_8UC3)),
+               std::invalid_argument);
+  // Nothing rendered: nothing is the object's.
+  EXPECT_EQ(cv::countNonZero(derive_object_pixels(cam, cv::Mat::ones(240, 320, CV_32F), {}, po)), 0);
+}
+
+// Good starts stay good without a mask, with a detector's box too: the table, the box touching the object and
+// the post in front do not pull the render onto themselves.
+TEST(ObjectPixels, WithoutAMaskGoodStartsStayWithinTwoMillimetres) {
+  const ClutteredScene s = make_cluttered_scene(4);
+  const auto points = metric_points(s.object);
+  cv::Rect box = cv::boundingRect(cv::Mat(s.scene.visible_masks[0] >= 0.5f));
+  std::mt19937_64 rng(11);
+  for (int k = 0; k < 4; ++k) {
+    const Pose start = perturb_pose(s.truth, s.object.center(), M_PI / 180, 0.001, rng);
+    const RefineResult r = Refiner(test_options()).refine(s.cam, s.obs, s.object, start);
+    EXPECT_LT(1e3 * add_error(points, r.pose, s.truth), 2.0) << "start " << k;
+    EXPECT_TRUE(r.plausible) << "start " << k;
+    EXPECT_GT(r.mask_iou, 0.8) << "start " << k;  // against the derived pixels
+    Observation boxed = s.obs;
+    boxed.box = box;
+    const RefineResult b = Refiner(test_options()).refine(s.cam, boxed, s.object, start);
+    EXPECT_LT(1e3 * add_error(points, b.pose, s.truth), 2.0) << "start " << k << ", with a box";
+  }
+}
