@@ -49,6 +49,12 @@ struct Seed {
 /// track between frames on a weakly printed object.
 bool explores(const std::vector<Seed>& starts);
 
+/// A detector's box for a refinement from `starts` (ObjectTarget::box): the object's box projected at the first
+/// detection among them (DOPE's projected cuboid: its keypoints are the detector's 2D evidence), within the
+/// image; empty when no start is a detection (a track's own pose is no detector's evidence) or the object reaches
+/// the camera plane.
+cv::Rect detector_box(const Camera& camera, const Mesh& mesh, const std::vector<Seed>& starts);
+
 /// The refiner options for a frame whose targets all start from steady tracks (none explores(), each
 /// ObjectTrack::steady()): `o` with its batch_size and iterations capped at TrackOptions' (where those are set).
 RefinerOptions tracked_options(const RefinerOptions& o, const TrackOptions& t);

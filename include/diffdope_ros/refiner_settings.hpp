@@ -17,10 +17,18 @@ namespace diffdope_ros {
 
 class ErrorReporter;
 
+/// ~mask_source: what tells the refiner which pixels are the object's. kNone: nothing, as beside DOPE (with depth
+/// the refiner derives them); kTopic: the `mask` topic; kBox: the detector's box, the object's box projected at
+/// the detected pose (DOPE's projected cuboid), which bounds where its pixels are sought.
+enum class MaskSource { kNone, kTopic, kBox };
+/// "none", "topic", "box"; std::invalid_argument naming the value otherwise.
+MaskSource parse_mask_source(const std::string& name);
+
 struct RefinerSettings {
   StreamMode mode = StreamMode::kTracking;  // ~mode
   bool use_depth = true;                    // ~use_depth
-  bool use_mask = false;                    // ~use_mask
+  MaskSource mask_source = MaskSource::kNone;  // ~mask_source (or the older ~use_mask: true = topic)
+  bool use_mask = false;                    // mask_source == kTopic: subscribe to and synchronise `mask`
   bool publish_tf = true;                   // ~publish_tf
   bool publish_implausible = false;         // ~publish_implausible
   int queue_size = 10;                      // ~queue_size (messages)

@@ -136,6 +136,18 @@ bool explores(const std::vector<Seed>& starts) {
   return starts.front().source == SeedSource::kDetector;
 }
 
+cv::Rect detector_box(const Camera& camera, const Mesh& mesh, const std::vector<Seed>& starts) {
+  for (const Seed& start : starts) {
+    if (start.source != SeedSource::kDetector) continue;
+    const Eigen::AlignedBox2d b = camera.project_bounds(mesh.bbox_corners(start.pose), 1e-3);
+    if (b.isEmpty()) return cv::Rect();
+    const cv::Rect box(cv::Point(int(std::floor(b.min().x())), int(std::floor(b.min().y()))),
+                       cv::Point(int(std::ceil(b.max().x())) + 1, int(std::ceil(b.max().y())) + 1));
+    return box & cv::Rect(0, 0, camera.width, camera.height);
+  }
+  return cv::Rect();
+}
+
 RefinerOptions tracked_options(const RefinerOptions& o, const TrackOptions& t) {
   RefinerOptions out = o;
   // A cap, never a raise: a user who lowers the refiner's own budget lowers the tracked one with it.

@@ -7,6 +7,7 @@
 #include <optional>
 
 #include "diffdope/object_track.hpp"
+#include "diffdope/primitives.hpp"
 
 using namespace diffdope;
 
@@ -407,4 +408,20 @@ TEST(ObjectTrack, ATrackIsSteadyWhenRefinedTwiceAndNotStalled) {
   t.report(at(0.0), false, 1.7);
   t.report(at(0.0), false, 1.8);  // lost
   EXPECT_FALSE(t.steady(1.9));
+}
+
+// ~mask_source box: the detection's projected model box, clipped to the image; nothing from a track's own pose.
+TEST(ObjectTrack, ADetectorsBoxIsTheObjectsBoxProjectedAtTheDetection) {
+  const Camera cam(400, 400, 159.5, 119.5, 320, 240);
+  const Mesh cube = make_box(Eigen::Vector3d(0.1, 0.1, 0.1), make_flat_texture(Eigen::Vector3f(0.5f, 0.5f, 0.5f)));
+  const Pose ahead(Eigen::Matrix3d::Identity(), Eigen::Vector3d(0, 0, 1.0) - cube.center());
+  const Pose track_pose(Eigen::Matrix3d::Identity(), Eigen::Vector3d(0.3, 0, 1.0) - cube.center());
+  const cv::Rect box = detector_box(cam, cube, {Seed{track_pose, SeedSource::kTrack}, Seed{ahead, SeedSource::kDetector}});
+  // The near face (z = 0.95) spans 0.1 m: 42 px about the centre.
+  EXPECT_NEAR(box.x + 0.5 * box.width, 160, 1.5);
+  EXPECT_NEAR(box.width, 400 * 0.1 / 0.95, 2.5);
+  EXPECT_TRUE(detector_box(cam, cube, {Seed{track_pose, SeedSource::kTrack}}).empty());
+  const Pose aside(Eigen::Matrix3d::Identity(), Eigen::Vector3d(0.38, 0, 1.0) - cube.center());
+  const cv::Rect clipped = detector_box(cam, cube, {Seed{aside, SeedSource::kDetector}});
+  EXPECT_EQ(clipped.x + clipped.width, 320);  // within the image
 }

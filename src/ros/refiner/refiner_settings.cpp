@@ -11,6 +11,13 @@
 
 namespace diffdope_ros {
 
+MaskSource parse_mask_source(const std::string& name) {
+  if (name == "none") return MaskSource::kNone;
+  if (name == "topic") return MaskSource::kTopic;
+  if (name == "box") return MaskSource::kBox;
+  throw std::invalid_argument("~mask_source: unknown '" + name + "' (none, topic or box)");
+}
+
 void check_refiner_settings(RefinerSettings& s) {
   try {
     const diffdope::OptionRange check{"parameters"};
@@ -42,7 +49,17 @@ RefinerSettings load_refiner_settings(const ros::NodeHandle& pnh, const std::str
     s.mode = StreamMode::kTracking;
   }
   s.use_depth = pnh.param("use_depth", s.use_depth);
-  s.use_mask = pnh.param("use_mask", s.use_mask);
+  // ~mask_source, or the older ~use_mask (true: the topic); both, disagreeing, is a configuration error.
+  const bool use_mask = pnh.param("use_mask", false);
+  const std::string source = pnh.param<std::string>("mask_source", "");
+  try {
+    s.mask_source = source.empty() ? (use_mask ? MaskSource::kTopic : MaskSource::kNone) : parse_mask_source(source);
+    if (use_mask && s.mask_source != MaskSource::kTopic)
+      throw std::invalid_argument("~use_mask is true but ~mask_source is '" + source + "' (use ~mask_source alone)");
+  } catch (const std::invalid_argument& e) {
+    s.error = e.what();
+  }
+  s.use_mask = s.mask_source == MaskSource::kTopic;
   s.queue_size = pnh.param("queue_size", s.queue_size);
   s.max_interval = pnh.param("max_interval", s.max_interval);
   s.sync_timeout = pnh.param("sync_timeout", s.sync_timeout);
