@@ -23,8 +23,8 @@ struct ObjectPixelsOptions {
   /// Keep only the connected groups of pixels that touch what the render covers: an object is one piece, and
   /// a neighbour entering the reach elsewhere is not it.
   bool touching_render = false;
-  /// Where no depth reading says (holes at silhouettes, dark or shiny surfaces) within reach, the colour decides
-  /// when an rgb image is given: the probability of the pixel's colour under the object's colour histogram (from
+  /// Where no depth reading says (holes at silhouettes, dark or shiny surfaces) within reach and the hole meets
+  /// the object's pixels, the colour decides when an rgb image is given: the probability of the pixel's colour under the object's colour histogram (from
   /// the pixels depth gave it) against its surroundings' (the readings near it that are not the object), as
   /// region-based trackers weigh colour (PWP3D). Without rgb such pixels are not the object's.
   bool holes_from_colour = false;

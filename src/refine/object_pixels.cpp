@@ -98,45 +98,22 @@ int pixels_at(const Camera& camera, double metres, double z) {
   return std::clamp(int(std::ceil(metres * std::max(camera.fx, camera.fy) / std::max(z, 0.05))), 1, 200);
 }
 
-}  // namespace
-
-cv::Mat derive_object_pixels(const Camera& camera, const cv::Mat& d, const std::vector<RenderImage>& renders,
-                             const ObjectPixelsOptions& options, const cv::Mat& rgb) {
+/// derive_object_pixels() within a window of the image: `camera` is the window's (its principal point shifted),
+/// the images are the window's parts; `min_points` is 0.5 % of the whole image's quarter (the planes' least
+/// support), `bounds` in the window's pixels.
+cv::Mat pixels_in_window(const Camera& camera, const cv::Mat& d, const std::vector<cv::Mat>& depth,
+                         const std::vector<cv::Mat>& covered, const cv::Mat& covered_any, double z_near,
+                         const ObjectPixelsOptions& options, const cv::Rect& bounds, const cv::Mat& rgb,
+                         size_t min_points) {
   const cv::Size size(camera.width, camera.height);
-  if (d.empty() || d.type() != CV_32F) throw std::invalid_argument("derive_object_pixels: no depth image (CV_32F)");
-  if (d.size() != size) throw std::invalid_argument("derive_object_pixels: the depth image is not the camera's size");
-  if (!(options.margin > 0 && options.margin <= 1))
-    throw std::invalid_argument("derive_object_pixels: the margin must be in (0, 1] metres");
-  if (!rgb.empty() && (rgb.type() != CV_32FC3 || rgb.size() != size))
-    throw std::invalid_argument("derive_object_pixels: the rgb image is not CV_32FC3 of the camera's size");
-  if (!(options.surface_search >= 0 && options.surface_search <= 1))
-    throw std::invalid_argument("derive_object_pixels: surface_search must be in [0, 1] metres");
-  const double margin = options.margin;
-  // What each render covers with a depth (a sliver at a silhouette says nothing of the object's depth range).
-  std::vector<cv::Mat> covered;
-  cv::Mat covered_any = cv::Mat::zeros(size, CV_8U);
-  double z_near = std::numeric_limits<double>::infinity();
-  for (const RenderImage& img : renders) {
-    if (img.depth.size() != size || img.coverage.size() != size)
-      throw std::invalid_argument("derive_object_pixels: a render is not the camera's size");
-    covered.push_back((img.coverage >= 0.5f) & (img.depth > 0.0f));
-    covered_any |= covered.back();
-    if (cv::countNonZero(covered.back()) == 0) continue;
-    cv::Mat masked = img.depth.clone();
-    masked.setTo(std::numeric_limits<float>::infinity(), ~covered.back());
-    double z = 0;
-    cv::minMaxLoc(masked, &z);
-    z_near = std::min(z_near, z);
-  }
-  if (cv::countNonZero(covered_any) == 0) return cv::Mat::zeros(size, CV_32F);
-
   // Within reach: around each render, at the depths it shows there give or take the margin. An occluder in front
   // of the object, or a wall behind it, lies outside that depth range.
+  const double margin = options.margin;
   const int radius = pixels_at(camera, margin, z_near);
   const cv::Mat kernel = cv::getStructuringElement(cv::MORPH_RECT, cv::Size(2 * radius + 1, 2 * radius + 1));
   cv::Mat mask = cv::Mat::zeros(size, CV_8U), within_reach = cv::Mat::zeros(size, CV_8U);
-  for (size_t i = 0; i < renders.size(); ++i) {
-    cv::Mat nearest = renders[i].depth.clone(), farthest = renders[i].depth.clone();
+  for (size_t i = 0; i < depth.size(); ++i) {
+    cv::Mat nearest = depth[i].clone(), farthest = depth[i].clone();
     nearest.setTo(std::numeric_limits<float>::infinity(), ~covered[i]);
     farthest.setTo(0.0f, ~covered[i]);
     cv::erode(nearest, nearest, kernel);     // smallest rendered depth around each pixel
@@ -172,7 +149,6 @@ cv::Mat derive_object_pixels(const Camera& camera, const cv::Mat& d, const std::
   for (int y = 0; y < camera.height; y += 2)
     for (int x = 0; x < camera.width; x += 2)
       if (point(x, y).z() > 0 && search.at<uchar>(y, x)) outside.push_back(point(x, y));
-  const size_t min_points = size_t(0.005 * camera.width * camera.height / 4);
   const double tolerance = 0.02;
   std::mt19937 rng(1);
   for (int k = 0; k < 6 && outside.size() >= std::max<size_t>(min_points, 3); ++k) {
@@ -204,16 +180,16 @@ cv::Mat derive_object_pixels(const Camera& camera, const cv::Mat& d, const std::
         if (!mask.at<uchar>(y, x) || !on_plane.at<uchar>(y, x) || !reaches_outside[size_t(labels.at<int>(y, x))])
           continue;
         bool rendered_there = false;
-        for (size_t i = 0; i < renders.size() && !rendered_there; ++i)
+        for (size_t i = 0; i < depth.size() && !rendered_there; ++i)
           rendered_there = covered[i].at<uchar>(y, x) &&
-                           std::abs(d.at<float>(y, x) - renders[i].depth.at<float>(y, x)) <= band;
+                           std::abs(d.at<float>(y, x) - depth[i].at<float>(y, x)) <= band;
         if (!rendered_there) mask.at<uchar>(y, x) = 0;
       }
     outside.swap(rest);
   }
-  if (!options.bounds.empty()) {
+  if (!bounds.empty()) {
     cv::Mat inside = cv::Mat::zeros(size, CV_8U);
-    inside(options.bounds & cv::Rect(cv::Point(0, 0), size)).setTo(255);
+    inside(bounds & cv::Rect(cv::Point(0, 0), size)).setTo(255);
     mask &= inside;
   }
   if (options.touching_render) {
@@ -231,14 +207,80 @@ cv::Mat derive_object_pixels(const Camera& camera, const cv::Mat& d, const std::
   mask.convertTo(out, CV_32F, 1.0 / 255.0);
   if (options.holes_from_colour && !rgb.empty()) {
     cv::Mat holes = ~(d > 0) & within_reach;  // (NaN compares false: no reading)
-    if (!options.bounds.empty()) {
+    if (!bounds.empty()) {
       cv::Mat inside = cv::Mat::zeros(size, CV_8U);
-      inside(options.bounds & cv::Rect(cv::Point(0, 0), size)).setTo(255);
+      inside(bounds & cv::Rect(cv::Point(0, 0), size)).setTo(255);
       holes &= inside;
     }
+    // Only holes that meet the object's pixels: a sensor's dropout blob elsewhere in the reach is not the object,
+    // whatever its colour.
+    cv::Mat next_to_object, labels;
+    cv::dilate(mask, next_to_object, cv::getStructuringElement(cv::MORPH_RECT, cv::Size(3, 3)));
+    const int n_labels = cv::connectedComponents(holes, labels, 8, CV_32S);
+    std::vector<char> meets(size_t(n_labels), 0);
+    for (int y = 0; y < camera.height; ++y)
+      for (int x = 0; x < camera.width; ++x)
+        if (holes.at<uchar>(y, x) && next_to_object.at<uchar>(y, x)) meets[size_t(labels.at<int>(y, x))] = 1;
+    for (int y = 0; y < camera.height; ++y)
+      for (int x = 0; x < camera.width; ++x)
+        if (holes.at<uchar>(y, x) && !meets[size_t(labels.at<int>(y, x))]) holes.at<uchar>(y, x) = 0;
     const cv::Mat background = (d > 0) & around & ~mask;
     colour_holes(rgb, mask, background, holes, out);
   }
+  return out;
+}
+
+}  // namespace
+
+cv::Mat derive_object_pixels(const Camera& camera, const cv::Mat& d, const std::vector<RenderImage>& renders,
+                             const ObjectPixelsOptions& options, const cv::Mat& rgb) {
+  const cv::Size size(camera.width, camera.height);
+  if (d.empty() || d.type() != CV_32F) throw std::invalid_argument("derive_object_pixels: no depth image (CV_32F)");
+  if (d.size() != size) throw std::invalid_argument("derive_object_pixels: the depth image is not the camera's size");
+  if (!(options.margin > 0 && options.margin <= 1))
+    throw std::invalid_argument("derive_object_pixels: the margin must be in (0, 1] metres");
+  if (!rgb.empty() && (rgb.type() != CV_32FC3 || rgb.size() != size))
+    throw std::invalid_argument("derive_object_pixels: the rgb image is not CV_32FC3 of the camera's size");
+  if (!(options.surface_search >= 0 && options.surface_search <= 1))
+    throw std::invalid_argument("derive_object_pixels: surface_search must be in [0, 1] metres");
+  // What each render covers with a depth (a sliver at a silhouette says nothing of the object's depth range).
+  std::vector<cv::Mat> covered;
+  cv::Mat covered_any = cv::Mat::zeros(size, CV_8U);
+  double z_near = std::numeric_limits<double>::infinity();
+  for (const RenderImage& img : renders) {
+    if (img.depth.size() != size || img.coverage.size() != size)
+      throw std::invalid_argument("derive_object_pixels: a render is not the camera's size");
+    covered.push_back((img.coverage >= 0.5f) & (img.depth > 0.0f));
+    covered_any |= covered.back();
+    if (cv::countNonZero(covered.back()) == 0) continue;
+    cv::Mat masked = img.depth.clone();
+    masked.setTo(std::numeric_limits<float>::infinity(), ~covered.back());
+    double z = 0;
+    cv::minMaxLoc(masked, &z);
+    z_near = std::min(z_near, z);
+  }
+  if (cv::countNonZero(covered_any) == 0) return cv::Mat::zeros(size, CV_32F);
+
+  // Only the object's surroundings are searched (its reach and the surfaces around it): the rest of the image
+  // cannot be its pixels. A robot (surface_search 0) is sought in the whole image.
+  cv::Rect window(cv::Point(0, 0), size);
+  if (options.surface_search > 0) {
+    const int grow = pixels_at(camera, options.margin, z_near) + pixels_at(camera, options.surface_search, z_near) + 2;
+    const cv::Rect b = cv::boundingRect(covered_any);
+    const cv::Point tl((std::max(b.x - grow, 0) / 2) * 2, (std::max(b.y - grow, 0) / 2) * 2);  // even: the same
+    window = cv::Rect(tl, cv::Point(b.x + b.width + grow, b.y + b.height + grow)) & window;     // sampling grid
+  }
+  Camera inside = camera;
+  inside.cx -= window.x, inside.cy -= window.y;
+  inside.width = window.width, inside.height = window.height;
+  std::vector<cv::Mat> depth, covered_in;
+  for (size_t i = 0; i < renders.size(); ++i) depth.push_back(renders[i].depth(window)), covered_in.push_back(covered[i](window));
+  const cv::Rect bounds = options.bounds.empty() ? cv::Rect() : (options.bounds - window.tl()) & cv::Rect(cv::Point(0, 0), window.size());
+  if (!options.bounds.empty() && bounds.empty()) return cv::Mat::zeros(size, CV_32F);
+  cv::Mat out = cv::Mat::zeros(size, CV_32F);
+  pixels_in_window(inside, d(window), depth, covered_in, covered_any(window), z_near, options, bounds,
+                   rgb.empty() ? cv::Mat() : rgb(window), size_t(0.005 * camera.width * camera.height / 4))
+      .copyTo(out(window));
   return out;
 }
 

@@ -188,8 +188,8 @@ RefineRun::RefineRun(const RefinerOptions& o, const std::vector<RefineView>& vie
   best_overall_ = std::numeric_limits<double>::infinity();
 }
 
-cv::Mat RefineRun::object_pixels_about(Renderer& renderer, const std::vector<Pose>& poses, double margin) const {
-  const Level& fine = fine_.front();
+bool RefineRun::derive_pixels(Renderer& renderer, const std::vector<Pose>& poses, double margin) {
+  Level& fine = fine_.front();
   ObjectPixelsOptions po;
   po.margin = std::min(margin, 1.0);
   po.surface_search = std::min(0.5 * diameter_, 1.0);  // the object's surroundings, at its own scale
@@ -197,14 +197,9 @@ cv::Mat RefineRun::object_pixels_about(Renderer& renderer, const std::vector<Pos
   po.holes_from_colour = true;
   if (fine.obs.has_box()) po.bounds = search_box(fine.obs.box);
   evaluations_ += long(poses.size());
-  return derive_object_pixels(fine.cam, fine.obs.depth, renderer.render(fine.cam, mesh(), poses, cv::Mat()), po,
-                              fine.obs.rgb);
-}
-
-bool RefineRun::derive_pixels(Renderer& renderer, const std::vector<Pose>& poses, double margin) {
-  const cv::Mat pixels = object_pixels_about(renderer, poses, margin);
+  const cv::Mat pixels = derive_object_pixels(fine.cam, fine.obs.depth,
+                                              renderer.render(fine.cam, mesh(), poses, cv::Mat()), po, fine.obs.rgb);
   if (cv::countNonZero(pixels >= 0.5f) == 0) return false;
-  Level& fine = fine_.front();
   fine.obs.mask = pixels;
   if (!coarse_.empty()) {
     Level& coarse = coarse_.front();
@@ -225,12 +220,13 @@ void RefineRun::update_object_pixels(Renderer& renderer) {
     loss_.weight_mask = scan_loss_.weight_mask = res_.loss_used.weight_mask = 0;
   } else if (derivations_ == 1 && k_ == rederive_at_ && k_ > 0) {
     ++derivations_;
-    // The runs most likely to survive the halving at this iteration: the better half, by their best loss.
+    // About the best poses of the runs most likely to survive the halving at this iteration (the better half, by
+    // their best loss): a large-rate run may have stepped far from its best since.
     std::vector<int> runs = active_;
     std::stable_sort(runs.begin(), runs.end(), [&](int a, int b) { return best_[a].total < best_[b].total; });
     runs.resize(std::min<size_t>(runs.size(), std::max<size_t>(1, (runs.size() + 1) / 2)));
     std::vector<Pose> poses;
-    for (int i : runs) poses.push_back(poses_[size_t(i)]);
+    for (int i : runs) poses.push_back(best_pose_[size_t(i)]);
     derive_pixels(renderer, poses, std::max(reach / 3, options_.inlier_threshold));
   }
 }

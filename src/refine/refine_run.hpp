@@ -144,8 +144,6 @@ class RefineRun {
   /// derive_object_pixels() about `poses` within `margin` metres, at the fine scale and area-resized to the
   /// coarse one; false (the masks unchanged) when no pixel was found.
   bool derive_pixels(Renderer& renderer, const std::vector<Pose>& poses, double margin);
-  /// The object's pixels about `poses` within `margin` metres at the fine scale (derive_object_pixels()).
-  cv::Mat object_pixels_about(Renderer& renderer, const std::vector<Pose>& poses, double margin) const;
   double diameter_ = 1.0;
   RefineResult res_;
   std::vector<Pose> poses_, best_pose_, batch_;

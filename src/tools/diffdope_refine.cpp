@@ -443,7 +443,7 @@ int run(const Args& a) {
                 r.mask_iou < 0 ? "n/a" : fmt(r.mask_iou, "%.3f").c_str(),
                 r.depth_inliers < 0 ? "n/a" : fmt(r.depth_inliers, "%.3f").c_str(),
                 std::isfinite(z) ? fmt(z, "%.1f sigma").c_str() : "n/a", r.converged ? "yes" : "no",
-                r.plausible ? "yes" : "NO", r.confidence);
+                r.plausible ? "yes" : r.judged ? "NO" : "NO (nothing could judge the pose)", r.confidence);
     std::printf("time %.0f ms (B=%d, %d iterations, image scale %.2f, winner #%d, lr %.5f)\n", r.time_ms,
                 options.batch_size, r.iterations, options.image_scale, r.winner,
                 r.winner >= 0 ? r.learning_rates[r.winner] : 0.0);

@@ -36,3 +36,17 @@ TEST(RefinerSettings, EachRangeIsChecked) {
   EXPECT_NE(error_of([](RefinerSettings& s) { s.error_throttle = -1; }).find("~error_throttle"), std::string::npos);
   EXPECT_NE(error_of([](RefinerSettings& s) { s.track.max_failures = 0; }), "");
 }
+
+TEST(RefinerSettings, MaskSourcesByName) {
+  using diffdope_ros::MaskSource;
+  EXPECT_EQ(diffdope_ros::parse_mask_source("none"), MaskSource::kNone);
+  EXPECT_EQ(diffdope_ros::parse_mask_source("topic"), MaskSource::kTopic);
+  EXPECT_EQ(diffdope_ros::parse_mask_source("box"), MaskSource::kBox);
+  try {
+    diffdope_ros::parse_mask_source("Topic");
+    ADD_FAILURE() << "an unknown mask source was taken";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("~mask_source: unknown 'Topic'"), std::string::npos) << e.what();
+  }
+  EXPECT_EQ(RefinerSettings().mask_source, MaskSource::kNone);  // DOPE gives no mask
+}

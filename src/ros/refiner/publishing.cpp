@@ -24,6 +24,7 @@ diffdope_ros::RefinedPose refined_pose_msg(const diffdope::RefineResult& r, cons
   p.converged = r.converged;
   p.plausible = r.plausible;
   p.confidence = r.confidence;
+  p.judged = r.judged;
   p.iterations = r.iterations;
   p.time_ms = r.time_ms;
   return p;
