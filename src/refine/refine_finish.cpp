@@ -180,10 +180,12 @@ RefineResult RefineRun::finish(Renderer& renderer) {
   if (derives_pixels_ && std::isfinite(res.loss.total) &&
       derive_pixels(renderer, {res.pose}, options_.inlier_threshold)) {
     // The object's pixels about the chosen result, within what the verdict calls an inlier: the polish, the
-    // print alignment, the Newton steps and the scores weigh them.
+    // print alignment, the Newton steps and the scores weigh them. Losses under other pixels do not compare: the
+    // result's and the starts' again (a start no run beat stays the result).
     std::vector<LossValue> v;
     evaluate(renderer, {res.pose}, loss_, false, v, true);
     res.loss = v[0];
+    weigh_starts(renderer, res);
     print.known = false;
   }
   const Pose before_polish = res.pose;

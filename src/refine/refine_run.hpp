@@ -181,7 +181,8 @@ class RefineRun {
     bool known = false;
     double at(Renderer& renderer, const RefineResult& res);
   };
-  /// After a coarse phase: the initial loss at the fine scale, and a start no run beat as the result.
+  /// After a coarse phase, and under newly derived pixels: the initial loss at the fine scale, and a start no run
+  /// beat as the result.
   void weigh_starts(Renderer& renderer, RefineResult& res);
   /// The shape scan's best candidate replaces the start's basin when the evidence supports the jump.
   void weigh_candidate(Renderer& renderer, RefineResult& res, ResultPrint& print);

@@ -410,7 +410,11 @@ long planned_evaluations(const RefinerOptions& o) {
   const long polish = o.polish_iterations > 0 && o.iterations > 0 ? 1 + long(o.polish_runs) * o.polish_iterations : 0;
   const long newton = o.newton_rounds > 0 && o.iterations > 0 ? 1 + long(o.newton_rounds) * (kSecantProbePoses + 3) : 0;
   const long passes = print > 0 && newton > 0 ? 2 : 1;
-  return total + 2 + candidate + polish + passes * (print + newton) +
+  // Without a mask (derive_mask): the renders the object's pixels are derived about (the starts, at most one per
+  // run; the better half of the runs; the result), and the result's and the starts' losses under the last ones.
+  const long batch = std::max(o.batch_size, 1);
+  const long derive = o.derive_mask ? batch + (batch + 1) / 2 + 2 + batch : 0;
+  return total + 2 + candidate + polish + passes * (print + newton) + derive +
          (o.probe_distance > 0 ? kCurvatureProbeEvaluations : 0);
 }
 

@@ -218,6 +218,10 @@ TEST(BagAccuracy, RefinedPosesTfAndScores) {
         // right pose's full silhouette with it is at least ~0.75.
         EXPECT_GT(p.mask_iou, 0.7);
         EXPECT_LE(p.mask_iou, 1.0);
+      } else if (has_depth) {
+        // Against the pixels derived from depth.
+        EXPECT_GT(p.mask_iou, 0.7);
+        EXPECT_LE(p.mask_iou, 1.0);
       } else {
         EXPECT_EQ(p.mask_iou, -1.0);
       }

@@ -20,6 +20,7 @@ TEST(PlannedEvaluations, RunsTimesIterationsLessWhatHalvingDrops) {
   o.probe_distance = 0;  // no curvature probe
   o.polish_iterations = 0;
   o.newton_rounds = 0;
+  o.derive_mask = false;  // (below)
   EXPECT_EQ(planned_evaluations(o), 16 * 101 + 2);
   o.successive_halving = true;  // 25 iterations each at 16, 8, 4, 2 runs, then the last evaluation at 2
   EXPECT_EQ(planned_evaluations(o), 16 * 25 + 8 * 25 + 4 * 25 + 2 * 25 + 2 + 2);
@@ -42,6 +43,11 @@ TEST(PlannedEvaluations, RunsTimesIterationsLessWhatHalvingDrops) {
   o.newton_rounds = 2;
   const long newton = 1 + 2 * (kSecantProbePoses + 3), print = print_alignment_evaluations(o.print_search) + 2;
   EXPECT_EQ(planned_evaluations(o) - without, 2 * newton + print);
+  // Without a mask: the renders the pixels are derived about (the starts, at most one per run; the better half;
+  // the result), and the result's and the starts' losses under the last pixels.
+  const long masked = planned_evaluations(o);
+  o.derive_mask = true;
+  EXPECT_EQ(planned_evaluations(o) - masked, 16 + 8 + 2 + 16);
 }
 
 TEST(RefineTimeEstimator, UsesThePriorUntilARefinementWasTimed) {

@@ -119,6 +119,7 @@ TEST(Refiner, SuccessiveHalvingDropsTheWorseHalfThreeTimes) {
   o.explore_tolerance = 0;  // (the L-block has no shape turns anyway; planned_evaluations would count them)
   o.polish_iterations = 0;  // (run_histories do not hold the polish's nor the Newton steps'; counted below)
   o.newton_rounds = 0;
+  o.derive_mask = false;  // (the scene has a mask: nothing is derived; planned_evaluations would count it)
   const RefineResult r = Refiner(o).refine(s.cam, s.obs, s.mesh, init);
   std::map<size_t, int> runs_by_length;
   for (const auto& h : r.run_histories) ++runs_by_length[h.size()];
