@@ -94,6 +94,19 @@ void colour_holes(const cv::Mat& rgb, const cv::Mat& object, const cv::Mat& back
     }
 }
 
+/// Keeps the 8-connected groups of nonzero `pixels` (CV_8U) that have a pixel where `where` is nonzero.
+void keep_groups_meeting(cv::Mat& pixels, const cv::Mat& where) {
+  cv::Mat labels;
+  const int n_labels = cv::connectedComponents(pixels, labels, 8, CV_32S);
+  std::vector<char> meets(size_t(n_labels), 0);
+  for (int y = 0; y < pixels.rows; ++y)
+    for (int x = 0; x < pixels.cols; ++x)
+      if (pixels.at<uchar>(y, x) && where.at<uchar>(y, x)) meets[size_t(labels.at<int>(y, x))] = 1;
+  for (int y = 0; y < pixels.rows; ++y)
+    for (int x = 0; x < pixels.cols; ++x)
+      if (pixels.at<uchar>(y, x) && !meets[size_t(labels.at<int>(y, x))]) pixels.at<uchar>(y, x) = 0;
+}
+
 int pixels_at(const Camera& camera, double metres, double z) {
   return std::clamp(int(std::ceil(metres * std::max(camera.fx, camera.fy) / std::max(z, 0.05))), 1, 200);
 }
@@ -168,17 +181,10 @@ cv::Mat pixels_in_window(const Camera& camera, const cv::Mat& d, const std::vect
     for (int y = 0; y < camera.height; ++y)
       for (int x = 0; x < camera.width; ++x)
         if (point(x, y).z() > 0 && plane.distance(point(x, y)) <= band) on_plane.at<uchar>(y, x) = 255;
-    cv::Mat labels;
-    const int n_labels = cv::connectedComponents(on_plane, labels, 8, CV_32S);
-    std::vector<char> reaches_outside(size_t(n_labels), 0);
-    for (int y = 0; y < camera.height; ++y)
-      for (int x = 0; x < camera.width; ++x)
-        if (on_plane.at<uchar>(y, x) && !within_reach.at<uchar>(y, x))
-          reaches_outside[size_t(labels.at<int>(y, x))] = 1;
+    keep_groups_meeting(on_plane, ~within_reach);  // the parts of the plane that reach outside
     for (int y = 0; y < camera.height; ++y)
       for (int x = 0; x < camera.width; ++x) {
-        if (!mask.at<uchar>(y, x) || !on_plane.at<uchar>(y, x) || !reaches_outside[size_t(labels.at<int>(y, x))])
-          continue;
+        if (!mask.at<uchar>(y, x) || !on_plane.at<uchar>(y, x)) continue;
         bool rendered_there = false;
         for (size_t i = 0; i < depth.size() && !rendered_there; ++i)
           rendered_there = covered[i].at<uchar>(y, x) &&
@@ -187,43 +193,22 @@ cv::Mat pixels_in_window(const Camera& camera, const cv::Mat& d, const std::vect
       }
     outside.swap(rest);
   }
+  cv::Mat inside_bounds(size, CV_8U, cv::Scalar(255));
   if (!bounds.empty()) {
-    cv::Mat inside = cv::Mat::zeros(size, CV_8U);
-    inside(bounds & cv::Rect(cv::Point(0, 0), size)).setTo(255);
-    mask &= inside;
+    inside_bounds.setTo(0);
+    inside_bounds(bounds & cv::Rect(cv::Point(0, 0), size)).setTo(255);
+    mask &= inside_bounds;
   }
-  if (options.touching_render) {
-    cv::Mat labels;
-    const int n_labels = cv::connectedComponents(mask, labels, 8, CV_32S);
-    std::vector<char> touches(size_t(n_labels), 0);
-    for (int y = 0; y < camera.height; ++y)
-      for (int x = 0; x < camera.width; ++x)
-        if (mask.at<uchar>(y, x) && covered_any.at<uchar>(y, x)) touches[size_t(labels.at<int>(y, x))] = 1;
-    for (int y = 0; y < camera.height; ++y)
-      for (int x = 0; x < camera.width; ++x)
-        if (mask.at<uchar>(y, x) && !touches[size_t(labels.at<int>(y, x))]) mask.at<uchar>(y, x) = 0;
-  }
+  if (options.touching_render) keep_groups_meeting(mask, covered_any);
   cv::Mat out;
   mask.convertTo(out, CV_32F, 1.0 / 255.0);
   if (options.holes_from_colour && !rgb.empty()) {
-    cv::Mat holes = ~(d > 0) & within_reach;  // (NaN compares false: no reading)
-    if (!bounds.empty()) {
-      cv::Mat inside = cv::Mat::zeros(size, CV_8U);
-      inside(bounds & cv::Rect(cv::Point(0, 0), size)).setTo(255);
-      holes &= inside;
-    }
+    cv::Mat holes = ~(d > 0) & within_reach & inside_bounds;  // (NaN compares false: no reading)
     // Only holes that meet the object's pixels: a sensor's dropout blob elsewhere in the reach is not the object,
     // whatever its colour.
-    cv::Mat next_to_object, labels;
+    cv::Mat next_to_object;
     cv::dilate(mask, next_to_object, cv::getStructuringElement(cv::MORPH_RECT, cv::Size(3, 3)));
-    const int n_labels = cv::connectedComponents(holes, labels, 8, CV_32S);
-    std::vector<char> meets(size_t(n_labels), 0);
-    for (int y = 0; y < camera.height; ++y)
-      for (int x = 0; x < camera.width; ++x)
-        if (holes.at<uchar>(y, x) && next_to_object.at<uchar>(y, x)) meets[size_t(labels.at<int>(y, x))] = 1;
-    for (int y = 0; y < camera.height; ++y)
-      for (int x = 0; x < camera.width; ++x)
-        if (holes.at<uchar>(y, x) && !meets[size_t(labels.at<int>(y, x))]) holes.at<uchar>(y, x) = 0;
+    keep_groups_meeting(holes, next_to_object);
     const cv::Mat background = (d > 0) & around & ~mask;
     colour_holes(rgb, mask, background, holes, out);
   }
