@@ -21,6 +21,14 @@ struct Plane {
   double distance(const Eigen::Vector3d& p) const { return std::abs(normal.dot(p) + offset); }
 };
 
+/// A surface is a plane found by RANSAC when at least kPlaneNormalShare of its points face as it does, within
+/// kPlaneNormalAngle (radians), their faces measured kNormalBaseline (metres) to each side: nearly all of a
+/// plane's points face as it does, few of a slab's through other surfaces; a centimetre averages a sensor's
+/// noise.
+constexpr double kPlaneNormalShare = 0.5;
+constexpr double kPlaneNormalAngle = 30.0 * 3.14159265358979323846 / 180.0;
+constexpr double kNormalBaseline = 0.01;
+
 /// Least-squares plane through `points` (the eigenvector of the smallest scatter).
 Plane fit_plane(const std::vector<Eigen::Vector3d>& points) {
   Eigen::Vector3d mean = Eigen::Vector3d::Zero();
@@ -107,6 +115,29 @@ void keep_groups_meeting(cv::Mat& pixels, const cv::Mat& where) {
       if (pixels.at<uchar>(y, x) && !meets[size_t(labels.at<int>(y, x))]) pixels.at<uchar>(y, x) = 0;
 }
 
+/// The share of the pixels of `where` within `tolerance` of `plane` whose own surface, from the points `step`
+/// pixels around them, faces as the plane does (within kPlaneNormalAngle). A plane's own points do, its noise
+/// averaged over the step; a slab that RANSAC cut through other surfaces (a cylinder's flank seen edge-on, the
+/// floor beneath it, a neighbour) mostly does not.
+template <typename PointAt>
+double normal_agreement(const Plane& plane, const cv::Mat& where, const PointAt& point, double tolerance, int step) {
+  const double min_cos = std::cos(kPlaneNormalAngle);
+  size_t agree = 0, judged = 0;
+  for (int y = step; y + step < where.rows; y += 2)
+    for (int x = step; x + step < where.cols; x += 2) {
+      const Eigen::Vector3d& p = point(x, y);
+      if (!where.at<uchar>(y, x) || !(p.z() > 0) || plane.distance(p) > tolerance) continue;
+      const Eigen::Vector3d &left = point(x - step, y), &right = point(x + step, y);
+      const Eigen::Vector3d &up = point(x, y - step), &down = point(x, y + step);
+      if (!(left.z() > 0 && right.z() > 0 && up.z() > 0 && down.z() > 0)) continue;
+      const Eigen::Vector3d n = (right - left).cross(down - up);
+      if (n.norm() < 1e-12) continue;
+      ++judged;
+      agree += std::abs(n.normalized().dot(plane.normal)) >= min_cos;
+    }
+  return judged ? double(agree) / double(judged) : 0.0;
+}
+
 int pixels_at(const Camera& camera, double metres, double z) {
   return std::clamp(int(std::ceil(metres * std::max(camera.fx, camera.fy) / std::max(z, 0.05))), 1, 200);
 }
@@ -163,6 +194,7 @@ cv::Mat pixels_in_window(const Camera& camera, const cv::Mat& d, const std::vect
     for (int x = 0; x < camera.width; x += 2)
       if (point(x, y).z() > 0 && search.at<uchar>(y, x)) outside.push_back(point(x, y));
   const double tolerance = 0.02;
+  const int normal_step = std::max(2, pixels_at(camera, kNormalBaseline, z_near));
   std::mt19937 rng(1);
   for (int k = 0; k < 6 && outside.size() >= std::max<size_t>(min_points, 3); ++k) {
     const Plane plane = dominant_plane(outside, tolerance, rng);
@@ -176,6 +208,10 @@ cv::Mat pixels_in_window(const Camera& camera, const cv::Mat& d, const std::vect
     if (residuals.size() < min_points) break;
     std::nth_element(residuals.begin(), residuals.begin() + long(residuals.size() / 2), residuals.end());
     const double spread = 1.4826 * residuals[residuals.size() / 2];  // |r| has median 0.674 sigma; MAD of r
+    outside.swap(rest);
+    // RANSAC also finds slabs through other surfaces (a cylinder's flank seen edge-on, with the floor and the
+    // object beside it): no plane, and its band would cut the object's end away.
+    if (normal_agreement(plane, search, point, tolerance, normal_step) < kPlaneNormalShare) continue;
     const double band = std::clamp(3 * spread, 0.005, tolerance);
     cv::Mat on_plane = cv::Mat::zeros(size, CV_8U);
     for (int y = 0; y < camera.height; ++y)
@@ -191,7 +227,6 @@ cv::Mat pixels_in_window(const Camera& camera, const cv::Mat& d, const std::vect
                            std::abs(d.at<float>(y, x) - depth[i].at<float>(y, x)) <= band;
         if (!rendered_there) mask.at<uchar>(y, x) = 0;
       }
-    outside.swap(rest);
   }
   cv::Mat inside_bounds(size, CV_8U, cv::Scalar(255));
   if (!bounds.empty()) {

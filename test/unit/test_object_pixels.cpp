@@ -100,6 +100,38 @@ TEST(ObjectPixels, LeaveOutTheTableANeighbourAndAnOccluder) {
   EXPECT_GT(cv::countNonZero(bounded > 0), 0);
 }
 
+// An estimate slid along a plain cylinder's axis: the end it does not cover yet is within reach and must stay
+// the object's, or nothing pulls the estimate back. A rod lies on the table behind that end; the table is a
+// plane, the rod and the slabs RANSAC cuts through it and the table beside it are not.
+TEST(ObjectPixels, AnUncoveredEndBesideARodStaysTheObjects) {
+  const Camera cam(420, 420, 159.5, 119.5, 320, 240);
+  const Mesh object = make_cylinder(0.035, 0.11, 48, make_flat_texture(Eigen::Vector3f(0.4f, 0.3f, 0.9f)));
+  const Mesh rod = make_cylinder(0.02, 0.24, 32, make_pattern_texture(128, 5));
+  const Mesh table = make_box(Eigen::Vector3d(0.8, 0.8, 0.02), make_pattern_texture(256, 7));
+  const Pose camera_from_world = look_at(Eigen::Vector3d(0.0, -0.42, 0.3), Eigen::Vector3d(0, 0, 0.03));
+  const Pose lying(Eigen::AngleAxisd(M_PI / 2, Eigen::Vector3d::UnitY()).toRotationMatrix(), Eigen::Vector3d(0, 0, 0.035));
+  auto renderer = make_cpu_renderer();
+  SyntheticNoise noise;
+  noise.hole_fraction = 0;
+  const SyntheticScene scene = synthesize_scene(
+      *renderer, cam,
+      {{&object, camera_from_world * lying},
+       {&rod, camera_from_world * Pose(Eigen::AngleAxisd(M_PI / 2, Eigen::Vector3d::UnitX()).toRotationMatrix(), Eigen::Vector3d(0.045, 0.18, 0.02))},
+       {&table, camera_from_world * Pose(Eigen::Matrix3d::Identity(), Eigen::Vector3d(0, 0, -0.01))}},
+      noise, 5);
+  // Slid 2 cm along its axis, away from the end by the rod; derived at a coarse start's margin.
+  const Pose slid = camera_from_world * Pose(lying.R, lying.t + Eigen::Vector3d(-0.02, 0, 0));
+  ObjectPixelsOptions po;
+  po.margin = 0.04;
+  po.surface_search = 0.5 * object.diameter();
+  po.touching_render = true;
+  const cv::Mat pixels = derive_object_pixels(cam, scene.depth, renderer->render(cam, object, {slid}), po);
+  const cv::Mat& visible = scene.visible_masks[0];
+  EXPECT_GT(overlap(pixels, visible), 0.95 * cv::countNonZero(visible >= 0.5f));
+  for (size_t k = 1; k < 3; ++k)  // the rod and the table
+    EXPECT_LT(overlap(pixels, scene.visible_masks[k]), 0.05 * cv::countNonZero(visible >= 0.5f)) << "scene object " << k;
+}
+
 TEST(ObjectPixels, RefusesWhatItCannotUse) {
   const Camera cam(420, 420, 159.5, 119.5, 320, 240);
   ObjectPixelsOptions po;
