@@ -22,9 +22,8 @@ struct TrackOptions {
   bool predict = true;
   double max_extrapolation = 2.0;    // extrapolate at most this multiple of the last interval
   /// Budget of a refinement whose targets all start from steady tracks (tracked_options()): B runs and iterations
-  /// (0: the refiner's own). A track is a frame from the truth, so a quarter of a detection's budget does: on the
-  /// demo bag (30 Hz, a scan-like bottle) 8 x 20 refines 19 frames/s at 0.4 mm / 1.8 deg mean error, 16 x 40 7 at
-  /// 0.2 mm / 1.6 deg.
+  /// (0: the refiner's own). A track is a frame from the truth, so a quarter of a detection's budget does, the
+  /// Newton steps converging what the descent leaves short (bench_tracking; docs/benchmarks.md).
   int batch_size = 8;                // [0, RefinerOptions::kMaxBatchSize]
   int iterations = 20;               // [0, RefinerOptions::kMaxIterations]
   /// Ranges: ages and timeouts [0, 3600] s, max_failures [1, 1000], max_extrapolation [0, 100]. Throws

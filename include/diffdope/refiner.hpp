@@ -98,8 +98,8 @@ struct RefinerOptions {
   /// gradient steps are bounded by the stiffest direction (a thin object across its width), so softer ones (its
   /// roll) are still converging when the iterations end (docs/benchmarks.md). When the steps lowered the loss by
   /// more than kPrintLossTolerance, the print alignment runs once more at the converged pose. 0 = off (the paper's
-  /// algorithm, and the calibration's default); never for tracked starts (ObjectTarget::explore false) nor with
-  /// iterations 0 (scoring the start).
+  /// algorithm, and the calibration's default); never with iterations 0 (scoring the start). Tracked starts get
+  /// them too: their few iterations leave the soft directions shortest.
   int newton_rounds = 16;  // [0, 32]
   LossOptions loss;             // term weights (all 1 as in the paper) and robustness constants
   /// A plain model (Mesh::plain(): no print, one colour) gets no colour term: its flat render against a lit image
@@ -256,7 +256,7 @@ struct ObjectTarget {
   cv::Mat mask;  // this object's visible mask (CV_32FC1, or any type to_mask_float takes); may be empty
   std::vector<Pose> alternatives;  // further initial poses; the runs are shared out among all of them
   /// false (a tracked start, explores() in object_track.hpp): no shape scan (explore_tolerance), retry
-  /// (retry_turn), polish nor Newton steps, and the print alignment searches only +-kTrackedPrintSearch
+  /// (retry_turn) nor polish, and the print alignment searches only +-kTrackedPrintSearch
   /// (print_alignment.hpp).
   bool explore = true;
   cv::Rect box;  // without a mask: a detector's 2D box around it (Observation::box); may be empty

@@ -314,7 +314,7 @@ std::vector<RefineResult> Refiner::refine_all_once(const RefinerOptions& options
       runs[k]->set_print_axes(print_axes(options, *t.mesh), t.explore ? options.print_search
                                                                       : std::min(options.print_search, kTrackedPrintSearch));
       runs[k]->set_polish(t.explore ? options.polish_iterations : 0);
-      runs[k]->set_newton(t.explore ? options.newton_rounds : 0);
+      runs[k]->set_newton(options.newton_rounds);
     } catch (const std::exception& e) {
       fail(k, e.what());
     }

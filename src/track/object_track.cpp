@@ -153,9 +153,9 @@ RefinerOptions tracked_options(const RefinerOptions& o, const TrackOptions& t) {
   // A cap, never a raise: a user who lowers the refiner's own budget lowers the tracked one with it.
   if (t.batch_size > 0) out.batch_size = std::min(o.batch_size, t.batch_size);
   if (t.iterations > 0) out.iterations = std::min(o.iterations, t.iterations);
-  // A tracked start is neither polished nor given Newton steps (Refiner::refine_all): not in its time budget.
+  // A tracked start is not polished (Refiner::refine_all): not in its time budget. It keeps the Newton steps,
+  // which converge what its few iterations leave short (the roll of an elongated object: bench_tracking).
   out.polish_iterations = 0;
-  out.newton_rounds = 0;
   out.validate();
   return out;
 }

@@ -55,10 +55,10 @@
 #include "diffdope/object_config.hpp"
 #include "diffdope/procedural.hpp"
 #include "diffdope/synthetic.hpp"
-#include "ros/tools/demo_scene.hpp"
+#include "diffdope/demo_scene.hpp"
 
 using namespace diffdope;
-using namespace diffdope_demo;
+using namespace diffdope::demo;
 namespace fs = std::filesystem;
 
 namespace {
@@ -215,27 +215,9 @@ int main(int argc, char** argv) {
     fs::create_directories(out_dir / "meshes", ec);
     if (ec) throw std::runtime_error((out_dir / "meshes").string() + ": cannot create: " + ec.message());
 
-    // Objects: scan-like meshes as users have them (15k triangles, UV atlas, 2048^2 print) and a low-poly printed
-    // box. One object: the bottle; more: the box (label 1, at the side), the bottle (2) and the mug (3).
-    std::vector<DemoObject> objects;
-    const auto bottle = [] { return make_scan_like(ScanShape::Bottle, Eigen::Vector3d(0.065, 0.04, 0.17), 15000, 2048, 11); };
-    if (args.can) {
-      ObjectSymmetry about_axis;
-      about_axis.continuous.push_back({Eigen::Vector3d::UnitZ(), Eigen::Vector3d::Zero()});
-      objects.push_back({"can", make_striped_can(), true, 1, about_axis});
-    } else if (args.twins) {  // one mesh, two instances, one label
-      const Mesh box = make_box(Eigen::Vector3d(0.10, 0.05, 0.14), make_label_texture(512, 11));
-      objects.push_back({"box", box, false, 1});
-      objects.push_back({"box", box, false, 1});
-    } else if (args.objects == 1) {
-      objects.push_back({"bottle", bottle(), false, 1});
-    } else {
-      objects.push_back({"box", make_box(Eigen::Vector3d(0.10, 0.05, 0.14), make_label_texture(512, 11)), false, 1});
-      objects.push_back({"bottle", bottle(), false, 2});
-      if (args.objects >= 3)
-        objects.push_back({"mug", make_scan_like(ScanShape::Mug, Eigen::Vector3d(0.11, 0.08, 0.095), 15000, 2048, 13),
-                           false, 3});
-    }
+    // Objects (demo_scene.hpp): the bottle; or the box, the bottle and the mug; or the can; or the twin boxes.
+    const std::vector<DemoObject> objects =
+        demo_objects(args.can ? "can" : args.twins ? "twins" : std::to_string(args.objects));
     const size_t n = objects.size();
 
     std::ostringstream yaml;
@@ -280,47 +262,14 @@ int main(int argc, char** argv) {
     }
 
     // Camera and scene layout.
-    const double f = 1.25 * args.width;
-    const Camera cam(f, f, args.width / 2.0 - 0.5, args.height / 2.0 - 0.5, args.width, args.height);
-    const double check_scale = std::min(1.0, 160.0 / args.width);
-    const Camera check_cam = cam.scaled(check_scale);
+    const Camera cam = demo_camera(args.width, args.height);
     auto renderer = make_cpu_renderer();
-    std::mt19937_64 layout_rng(args.seed * 0x9E3779B97F4A7C15ull + 1);
-    std::uniform_real_distribution<double> U(-1.0, 1.0);
-    const double spacing = args.twins ? 0.2 : n == 3 ? 0.12 : 0.14;
-    const int check_frames = std::min(args.frames, 200);
-    std::vector<Motion> motions, best_motions;
-    double best_score = -1;
-    int attempts = 0;
-    for (; attempts < 200; ++attempts) {  // redraw until every object stays in view and mostly unoccluded
-      motions.clear();
-      for (size_t i = 0; i < n; ++i) {
-        Motion m;
-        m.R0 = random_rotation(layout_rng);
-        const double x = (double(i) - 0.5 * double(n - 1)) * spacing + 0.01 * U(layout_rng);
-        m.centre0 = Eigen::Vector3d(x, 0.02 * U(layout_rng), 0.60 + 0.05 * U(layout_rng));
-        m.axis = random_unit(layout_rng);
-        m.turn_rate = (15.0 + 3.0 * U(layout_rng)) * M_PI / 180.0;
-        m.direction = random_unit(layout_rng);
-        motions.push_back(m);
-      }
-      double score = 2.0;  // the worst frame: min visible fraction, minus 1 when something leaves the image
-      for (int s = 0; s < check_frames && score > best_score; ++s) {
-        const int k = check_frames == args.frames ? s : int(std::lround(double(s) * (args.frames - 1) / (check_frames - 1)));
-        std::vector<SceneObject> objs;
-        for (size_t i = 0; i < n; ++i)
-          objs.push_back({&objects[i].mesh, motions[i].at(k / args.rate, objects[i].mesh.center())});
-        const FrameCheck fc = check_frame(*renderer, check_cam, objs, 2.0);
-        score = std::min(score, fc.min_visible - (fc.inside ? 0.0 : 1.0));
-      }
-      if (score > best_score) best_score = score, best_motions = motions;
-      if (best_score >= 0.75) break;
-    }
-    motions = best_motions;
-    if (best_score < 0.7)
+    const DemoLayout layout = choose_layout(objects, cam, args.frames, args.rate, args.seed);
+    const std::vector<Motion>& motions = layout.motions;
+    if (!layout.inside || layout.min_visible < 0.7)
       std::fprintf(stderr, "diffdope_make_bag: warning: no layout kept every object in view and >= 70 %% visible "
                            "(best: %s, min visible %.2f); using it anyway\n",
-                   best_score < 0 ? "an object leaves the image" : "in view", best_score < 0 ? best_score + 1 : best_score);
+                   layout.inside ? "in view" : "an object leaves the image", layout.min_visible);
 
     // The bag.
     const std::string bag_path = (out_dir / "demo.bag").string();
