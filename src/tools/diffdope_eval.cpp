@@ -1,7 +1,7 @@
 // diffdope_eval: the paper's evaluation protocol on a BOP-format dataset.
 //   diffdope_eval --bop ROOT --split NAME --perturbations DIR --out results.jsonl [--levels easy,medium,hard]
 //                 [--config FILE] [--summary-json FILE] [--threads N] [--max-samples N] [--generate N [--seed S]]
-//                 [--masks given|none|box]
+//                 [--masks given|none|box] [--method refiner|icp]
 // --generate N first writes perturbation files into DIR with the paper's rule (random axis, rotate by exactly
 // the angle; random direction, translate by exactly the distance): easy (1 deg, 1 mm), medium (10 deg, 10 mm),
 // hard (40 deg, 20 mm), N samples per level for every ground-truth instance of image 0 of each scene.
@@ -26,6 +26,7 @@
 #include "diffdope/metrics.hpp"
 #include "diffdope/refiner.hpp"
 #include "diffdope/synthetic.hpp"
+#include "icp_baseline.hpp"
 #include <opencv2/imgproc.hpp>
 #include <random>
 
@@ -41,6 +42,8 @@ int usage(int rc) {
                "                     [--symmetric ID,ID,...|none]  (instead of ROOT/models/models_info.json)\n"
                "                     [--masks given|none|box]  given: the visible masks (default); none: no mask, as\n"
                "                     beside DOPE; box: only the visible mask's bounding rectangle, as a 2D detector's\n"
+               "                     [--method refiner|icp]  icp: the baseline, point-to-plane ICP on the depth near\n"
+               "                     the start (the mask's, or the object's pixels derived there), no verdict\n"
                "Exit status: 0 all samples evaluated, 1 an error or some samples skipped, 2 bad arguments.\n";
   return rc;
 }
@@ -129,7 +132,8 @@ void apply_mask_mode(Observation& obs, const std::string& mode) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  std::string root, split, pert_dir, out_path, config, summary_path, device, symmetric_arg, masks = "given";
+  std::string root, split, pert_dir, out_path, config, summary_path, device, symmetric_arg, masks = "given",
+                                                                                  method = "refiner";
   std::set<std::string> levels;
   int threads = 0, max_samples = -1, generate = 0;
   uint64_t seed = 1;
@@ -159,7 +163,10 @@ int main(int argc, char** argv) {
         throw std::invalid_argument("--masks: unknown mode '" + v + "' (given, none, box)");
       masks = v;
     }
-    else if (a == "--levels") {
+    else if (a == "--method") {
+      if (v != "refiner" && v != "icp") throw std::invalid_argument("--method: unknown method '" + v + "' (refiner, icp)");
+      method = v;
+    } else if (a == "--levels") {
       std::stringstream ss(v);
       for (std::string l; std::getline(ss, l, ',');) {
         if (l != "easy" && l != "medium" && l != "hard")
@@ -183,7 +190,9 @@ int main(int argc, char** argv) {
     if (!device.empty()) options.device = device;
     options.validate();
     Refiner refiner(options);
-    std::cerr << "diffdope_eval: backend " << refiner.backend() << ", masks " << masks << "\n";
+    std::cerr << "diffdope_eval: " << (method == "icp" ? "point-to-plane ICP (the baseline)" : "backend " + refiner.backend())
+              << ", masks " << masks << "\n";
+    const std::unique_ptr<Renderer> icp_renderer = method == "icp" ? make_cpu_renderer(options.render) : nullptr;
     std::set<int> symmetric_ids;  // --symmetric: instead of models_info.json
     if (!symmetric_arg.empty() && symmetric_arg != "none") {
       std::stringstream ss(symmetric_arg);
@@ -263,7 +272,13 @@ int main(int argc, char** argv) {
             continue;
           }
           const Mesh& mesh = *mesh_ptr;
-          const RefineResult r = refiner.refine(img.camera, obs, mesh, p.pose);
+          RefineResult r;
+          if (icp_renderer) {  // the baseline: a pose and its time, no verdict (plausible and judged false)
+            const IcpResult icp = icp_refine(*icp_renderer, img.camera, obs, mesh, p.pose);
+            r.pose = icp.pose, r.time_ms = icp.time_ms, r.error = icp.error, r.learning_rates = {0.0}, r.winner = 0;
+          } else {
+            r = refiner.refine(img.camera, obs, mesh, p.pose);
+          }
           if (!r.error.empty()) {
             std::cerr << "\ndiffdope_eval: " << file.string() << " sample " << p.sample << ": obj " << p.obj_id
                       << " in scene " << scene << ": " << r.error << "; skipped\n";

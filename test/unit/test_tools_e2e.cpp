@@ -188,3 +188,32 @@ TEST(ToolsEndToEnd, EvalFailsLoudlyWhenItCannotEvaluateEverything) {
   EXPECT_EQ(eval("--perturbations " + (tmp.path / "p").string() + " --levels easy"), 1);
   EXPECT_NE(said().find("key 'two' is not an object id"), std::string::npos) << said();
 }
+
+// The ICP baseline (--method icp): on a generated dataset's easy starts it improves on them, with the mask and
+// without one; it gives no verdict, and an unknown method is a usage error.
+TEST(ToolsEndToEnd, IcpBaselineRefinesEasyStartsAndJudgesNothing) {
+  TempDir tmp;
+  const std::string root = (tmp.path / "bop").string();
+  ASSERT_EQ(run(std::string(DIFFDOPE_MAKE_DATASET_EXE) + " --out " + root +
+                " --scenes 2 --width 320 --height 240 --seed 9 2>/dev/null"), 0);
+  const std::string pert = (tmp.path / "pert").string();
+  for (const char* masks : {"given", "none"}) {
+    const std::string out = (tmp.path / (std::string(masks) + ".jsonl")).string(),
+                      summary = (tmp.path / (std::string(masks) + ".json")).string();
+    ASSERT_EQ(run(std::string(DIFFDOPE_EVAL_EXE) + " --bop " + root + " --split test --perturbations " + pert +
+                  " --out " + out + " --generate 1 --seed 4 --levels easy --method icp --masks " + masks +
+                  " --summary-json " + summary + " > /dev/null 2>&1"), 0) << masks;
+    const json s = json::parse(std::ifstream(summary));
+    EXPECT_GT(s["easy"]["auc_refined"].get<double>(), s["easy"]["auc_initial"].get<double>() + 1) << masks;
+    std::ifstream in(out);
+    int lines = 0;
+    for (std::string line; std::getline(in, line); ++lines) {
+      const json j = json::parse(line);
+      EXPECT_FALSE(j["plausible"].get<bool>());
+      EXPECT_FALSE(j["judged"].get<bool>());
+    }
+    EXPECT_GE(lines, 4) << masks;
+  }
+  EXPECT_EQ(run(std::string(DIFFDOPE_EVAL_EXE) + " --bop " + root + " --split test --perturbations " + pert +
+                " --out " + (tmp.path / "x.jsonl").string() + " --method sgd > /dev/null 2>&1"), 2);
+}
