@@ -54,8 +54,13 @@ bool explores(const std::vector<Seed>& starts);
 /// the camera plane.
 cv::Rect detector_box(const Camera& camera, const Mesh& mesh, const std::vector<Seed>& starts);
 
+/// Newton rounds at most on a frame of steady tracks: a track is a frame from the truth, and its steps take one
+/// or two rounds; the cap bounds the frame's time.
+constexpr int kTrackedNewtonRounds = 4;
+
 /// The refiner options for a frame whose targets all start from steady tracks (none explores(), each
-/// ObjectTrack::steady()): `o` with its batch_size and iterations capped at TrackOptions' (where those are set).
+/// ObjectTrack::steady()): `o` with its batch_size and iterations capped at TrackOptions' (where those are set),
+/// no polish, and at most kTrackedNewtonRounds Newton rounds.
 RefinerOptions tracked_options(const RefinerOptions& o, const TrackOptions& t);
 
 class ObjectTrack {

@@ -154,8 +154,10 @@ RefinerOptions tracked_options(const RefinerOptions& o, const TrackOptions& t) {
   if (t.batch_size > 0) out.batch_size = std::min(o.batch_size, t.batch_size);
   if (t.iterations > 0) out.iterations = std::min(o.iterations, t.iterations);
   // A tracked start is not polished (Refiner::refine_all): not in its time budget. It keeps the Newton steps,
-  // which converge what its few iterations leave short (the roll of an elongated object: bench_tracking).
+  // which converge what its few iterations leave short (the roll of an elongated object: bench_tracking), at
+  // most kTrackedNewtonRounds of them.
   out.polish_iterations = 0;
+  out.newton_rounds = std::min(o.newton_rounds, kTrackedNewtonRounds);
   out.validate();
   return out;
 }

@@ -167,7 +167,7 @@ TEST(NewtonSteps, ConvergeTrackedStartsToo) {
   const BarScene s{SyntheticNoise()};
   const auto points = metric_points(s.mesh);
   const RefinerOptions tracked = tracked_options(RefinerOptions(), TrackOptions());
-  ASSERT_EQ(tracked.newton_rounds, RefinerOptions().newton_rounds);
+  ASSERT_EQ(tracked.newton_rounds, kTrackedNewtonRounds);
   RefinerOptions plain = tracked;
   plain.newton_rounds = 0;
   Refiner refiner{RefinerOptions()};

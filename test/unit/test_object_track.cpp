@@ -378,7 +378,7 @@ TEST(ObjectTrack, LiveTracksGetTheTrackingBudget) {
   const RefinerOptions tracked = tracked_options(o, t);
   EXPECT_EQ(tracked.batch_size, t.batch_size);
   EXPECT_EQ(tracked.iterations, t.iterations);
-  EXPECT_LT(planned_evaluations(tracked), planned_evaluations(o) / 4);
+  EXPECT_LT(planned_evaluations(tracked), planned_evaluations(o) / 4) << planned_evaluations(tracked) << " " << planned_evaluations(o);
   EXPECT_DOUBLE_EQ(tracked.lr_high, o.lr_high);  // nothing else changes
   t.batch_size = 0;  // 0: the refiner's own
   t.iterations = 0;
