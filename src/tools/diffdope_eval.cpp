@@ -1,7 +1,7 @@
 // diffdope_eval: the paper's evaluation protocol on a BOP-format dataset.
 //   diffdope_eval --bop ROOT --split NAME --perturbations DIR --out results.jsonl [--levels easy,medium,hard]
 //                 [--config FILE] [--summary-json FILE] [--threads N] [--max-samples N] [--generate N [--seed S]]
-//                 [--masks given|none|box] [--method refiner|icp]
+//                 [--masks given|none|box|coarse[:SEED]] [--method refiner|icp]
 // --generate N first writes perturbation files into DIR with the paper's rule (random axis, rotate by exactly
 // the angle; random direction, translate by exactly the distance): easy (1 deg, 1 mm), medium (10 deg, 10 mm),
 // hard (40 deg, 20 mm), N samples per level for every ground-truth instance of image 0 of each scene.
@@ -22,6 +22,7 @@
 #include <sstream>
 
 #include "diffdope/bop.hpp"
+#include "diffdope/coarse_mask.hpp"
 #include "diffdope/input_files.hpp"
 #include "diffdope/metrics.hpp"
 #include "diffdope/refiner.hpp"
@@ -40,8 +41,10 @@ int usage(int rc) {
                "                     [--levels easy,medium,hard] [--config FILE] [--summary-json FILE]\n"
                "                     [--threads N] [--max-samples N] [--generate N [--seed S]] [--device auto|cpu|cuda]\n"
                "                     [--symmetric ID,ID,...|none]  (instead of ROOT/models/models_info.json)\n"
-               "                     [--masks given|none|box]  given: the visible masks (default); none: no mask, as\n"
-               "                     beside DOPE; box: only the visible mask's bounding rectangle, as a 2D detector's\n"
+               "                     [--masks given|none|box|coarse[:SEED]]  given: the visible masks (default); none: no\n"
+               "                     mask, as beside DOPE; box: only the visible mask's bounding rectangle, as a 2D\n"
+               "                     detector's; coarse: a segmenter's version of it (grown or shrunk, its outline\n"
+               "                     wandering, blobs; include/diffdope/coarse_mask.hpp)\n"
                "                     [--method refiner|icp]  icp: the baseline, point-to-plane ICP on the depth near\n"
                "                     the start (the mask's, or the object's pixels derived there), no verdict\n"
                "Exit status: 0 all samples evaluated, 1 an error or some samples skipped, 2 bad arguments.\n";
@@ -118,15 +121,23 @@ int write_perturbations(BopDataset& data, const std::string& dir, int samples, u
 }
 
 /// --masks: what of the visible mask the refiner is given. "box": its bounding rectangle, as a 2D detector gives
-/// it (an error when the scene has no mask to take it from); "none": nothing.
-void apply_mask_mode(Observation& obs, const std::string& mode) {
-  if (mode == "given") return;
-  if (mode == "box") {
-    if (!obs.has_mask()) throw std::runtime_error("--masks box: the scene has no visible mask to take the box from");
-    cv::Mat on = obs.mask >= 0.5f;
-    obs.box = cv::boundingRect(on);
+/// it (an error when the scene has no mask to take it from); "coarse": a segmenter's version of it
+/// (coarse_mask.hpp), the same for every start of the object in the image (`coarse_seed`); "none": nothing.
+/// Returns the IoU of the mask given with the visible one (-1: none given or no visible mask).
+double apply_mask_mode(Observation& obs, const std::string& mode, uint64_t coarse_seed) {
+  if (mode == "given") return obs.has_mask() ? 1.0 : -1.0;
+  if ((mode == "box" || mode == "coarse") && !obs.has_mask())
+    throw std::runtime_error("--masks " + mode + ": the scene has no visible mask to take it from");
+  if (mode == "coarse") {
+    const cv::Mat exact = obs.mask >= 0.5f;
+    obs.mask = coarse_mask(exact, coarse_seed);
+    const cv::Mat given = obs.mask >= 0.5f;
+    const double uni = cv::countNonZero(exact | given);
+    return uni > 0 ? cv::countNonZero(exact & given) / uni : -1.0;
   }
+  if (mode == "box") obs.box = cv::boundingRect(cv::Mat(obs.mask >= 0.5f));
   obs.mask = cv::Mat();
+  return -1.0;
 }
 
 }  // namespace
@@ -136,7 +147,7 @@ int main(int argc, char** argv) {
                                                                                   method = "refiner";
   std::set<std::string> levels;
   int threads = 0, max_samples = -1, generate = 0;
-  uint64_t seed = 1;
+  uint64_t seed = 1, coarse_seed = 1;
   try {
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
@@ -159,9 +170,14 @@ int main(int argc, char** argv) {
     else if (a == "--seed") seed = uint64_t(parse_integer_arg(a, v, 0, std::numeric_limits<long long>::max()));
     else if (a == "--symmetric") symmetric_arg = v;
     else if (a == "--masks") {
-      if (v != "given" && v != "none" && v != "box")
-        throw std::invalid_argument("--masks: unknown mode '" + v + "' (given, none, box)");
-      masks = v;
+      masks = v.substr(0, v.find(':'));
+      if (masks != "given" && masks != "none" && masks != "box" && masks != "coarse")
+        throw std::invalid_argument("--masks: unknown mode '" + v + "' (given, none, box, coarse[:SEED])");
+      if (v.find(':') != std::string::npos) {
+        if (masks != "coarse") throw std::invalid_argument("--masks: only coarse takes a seed, got '" + v + "'");
+        coarse_seed = uint64_t(parse_integer_arg("--masks coarse:SEED", v.substr(v.find(':') + 1), 0,
+                                                 std::numeric_limits<long long>::max()));
+      }
     }
     else if (a == "--method") {
       if (v != "refiner" && v != "icp") throw std::invalid_argument("--method: unknown method '" + v + "' (refiner, icp)");
@@ -205,6 +221,7 @@ int main(int argc, char** argv) {
     std::ofstream out(out_path);
     if (!out) throw std::runtime_error(out_path + ": cannot write");
 
+    std::vector<double> given_ious;  // --masks coarse: per result, the mask given against the visible one
     std::map<std::string, LevelStats> stats;
     std::map<int, std::map<std::string, LevelStats>> object_stats;  // by obj_id, then level
     VerdictTally verdicts;
@@ -261,10 +278,13 @@ int main(int argc, char** argv) {
           }
           const Mesh* mesh_ptr = nullptr;
           Observation obs;
+          double mask_iou_given = -1;
           try {
             mesh_ptr = &data.model(p.obj_id);
             obs = data.observation(img, gt->inst);
-            apply_mask_mode(obs, masks);
+            // One segmenter's mask per object and image, whatever the start.
+            mask_iou_given = apply_mask_mode(obs, masks, coarse_seed * 0x9E3779B97F4A7C15ull +
+                                                             uint64_t(scene) * 1000003ull + uint64_t(gt->inst));
           } catch (const std::exception& e) {
             std::cerr << "\ndiffdope_eval: " << file.string() << " sample " << p.sample << ": " << e.what()
                       << "; skipped\n";
@@ -314,6 +334,8 @@ int main(int argc, char** argv) {
           line["retried"] = r.retried;
           line["polish_iterations"] = r.polish_iterations;
           line["newton_steps"] = r.newton_steps;
+          line["given_mask_iou"] = mask_iou_given;  // the mask given against the visible one (-1: none given)
+          if (masks == "coarse") given_ious.push_back(mask_iou_given);
           line["print"] = {{"ncc", r.print.ncc}, {"best_ncc", r.print.best_ncc}, {"best_dx", r.print.best_dx},
                            {"best_dy", r.print.best_dy}, {"far_mean", r.print.far_mean}, {"far_std", r.print.far_std},
                            {"pixels", r.print.pixels}, {"render_contrast", r.print.render_contrast}};
@@ -377,6 +399,13 @@ int main(int argc, char** argv) {
                 verdicts.rejected_far, verdicts.far, verdicts.rejected_near, verdicts.near);
     summary["verdict"] = {{"over_10mm", verdicts.far}, {"over_10mm_rejected", verdicts.rejected_far},
                           {"under_5mm", verdicts.near}, {"under_5mm_rejected", verdicts.rejected_near}};
+    if (!given_ious.empty()) {  // --masks coarse: how coarse the masks given were
+      std::sort(given_ious.begin(), given_ious.end());
+      const double lo = given_ious[given_ious.size() / 10], mid = given_ious[given_ious.size() / 2],
+                   hi = given_ious[given_ious.size() * 9 / 10];
+      std::printf("masks given: IoU with the visible masks, median %.3f (10-90 %%: %.3f-%.3f)\n", mid, lo, hi);
+      summary["given_mask_iou"] = {{"median", mid}, {"p10", lo}, {"p90", hi}};
+    }
     if (!summary_path.empty()) std::ofstream(summary_path) << summary.dump(2) << "\n";
     if (all_ref.empty() && (skipped_scenes > 0 || skipped_files > 0))
       throw std::runtime_error("nothing was evaluated: " + std::to_string(skipped_scenes) + " scene(s) and " +
