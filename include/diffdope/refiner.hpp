@@ -120,11 +120,14 @@ struct RefinerOptions {
   /// (derive_mask), its pixels are sought this many diameters around its render at the start; otherwise the loss
   /// looks at the initial pose's projected bounding box grown by this fraction of its size on every side.
   double no_mask_window = 0.3;  // [0, 10]
-  /// Without an observed mask but with depth: the object's pixels are derived (derive_object_pixels(): depth
-  /// near its render, less what stands in front and the surfaces it stands among) at the start, when the fine
-  /// phase begins and at the chosen result, each time nearer (no_mask_window diameters, a third of that, then
-  /// inlier_threshold), and the loss, the polish, the Newton steps and the verdict use them as the mask. false:
-  /// the window alone (a table or a neighbour inside it then pulls the render onto itself).
+  /// Without an observed mask but with depth (one view): the object's pixels are derived (derive_object_pixels():
+  /// depth near its render, less what stands in front and the surfaces it stands among) at the start, when the
+  /// fine phase begins and at the chosen result, each time nearer (no_mask_window diameters, a third of that,
+  /// then inlier_threshold), and the loss, the polish, the Newton steps and the verdict use them as the mask.
+  /// With an observed mask and depth, the start's derivation checks it: a mask whose outline lies more than half
+  /// a pixel from the edge depth shows (a segmenter's, a few pixels off) is replaced by the derived pixels
+  /// (RefineResult::given_mask_replaced). false: a mask is taken as given, and without one the window alone
+  /// stands in (a table or a neighbour inside it then pulls the render onto itself).
   bool derive_mask = true;
   /// Quality: a depth reading within this distance (metres) of the render is an inlier.
   double inlier_threshold = 0.01;  // (0, 10]
@@ -216,6 +219,11 @@ struct RefineResult {
   double mask_iou = -1;               // IoU of rendered and observed masks (with depth, the render less where the
                                       // observed depth shows an occluder in front: loss.occlusion_margin);
                                       // without a mask, against the pixels derived (derive_mask); -1 with neither
+  double given_mask_offset = -1;      // pixels at the refining scale: how far a given mask's outline lies from the
+                                      // edge depth shows at the start (outline_offset()); -1 when not measured
+                                      // (no mask, no depth, several views, derive_mask false)
+  bool given_mask_replaced = false;   // that offset exceeded half a pixel: the derived pixels stood in for the
+                                      // mask in the loss, the later steps and the verdict
   double depth_inliers = -1;          // fraction of object pixels (observed or derived mask, else the render's) with a depth
                                       // reading within inlier_threshold of the render; -1 without depth
   bool converged = false;             // the winner's loss stopped improving (relative change < 1 % over the last 10 %)

@@ -23,6 +23,7 @@ RefinerOptions CalibrationOptions::default_refiner() {
   o.explore_tolerance = 0;
   o.iterations = 200;
   o.newton_rounds = 0;  // the 200 iterations and the later passes' small rates converge
+  o.derive_mask = false;  // the calibrator derives the robot's pixels itself (derive_mask()), per capture
   o.lr_low = 0.0002;
   o.lr_high = 0.006;
   return o;

@@ -11,6 +11,7 @@
 #include <sstream>
 #include <stdexcept>
 
+#include "diffdope/mask_agreement.hpp"
 #include "diffdope/object_pixels.hpp"
 #include "diffdope/print_alignment.hpp"
 #include "refine/refine_schedule.hpp"
@@ -138,12 +139,13 @@ RefineRun::RefineRun(const RefinerOptions& o, const std::vector<RefineView>& vie
     if (switch_at_ > 0) coarse_.push_back(make_level(view, o.image_scale * o.coarse_scale, coarse_frame, false));
   }
   // Without a mask the object's pixels are derived from depth (one view), or the window stands in for them, which
-  // is not an observation of the silhouette.
-  derives_pixels_ = !given_mask && o.derive_mask && views.size() == 1 && views.front().observed.has_depth();
+  // is not an observation of the silhouette. With a mask the first derivation checks it (update_object_pixels()).
+  derives_pixels_ = o.derive_mask && views.size() == 1 && views.front().observed.has_depth();
+  weighs_given_mask_ = given_mask && derives_pixels_;
   has_mask_ = given_mask || derives_pixels_;
   rederive_at_ = switch_at_ > 0 ? switch_at_ : o.iterations / 2;
   if (!has_mask_) loss_.weight_mask = 0;
-  if (derives_pixels_) loss_.weight_mask *= kDerivedMaskWeight;
+  if (derives_pixels_ && !given_mask) loss_.weight_mask *= kDerivedMaskWeight;
   bool all_plain = true, any_depth = false, any_rgb = false;
   for (const RefineView& view : views) {
     all_plain = all_plain && view.mesh->plain();
@@ -188,8 +190,8 @@ RefineRun::RefineRun(const RefinerOptions& o, const std::vector<RefineView>& vie
   best_overall_ = std::numeric_limits<double>::infinity();
 }
 
-bool RefineRun::derive_pixels(Renderer& renderer, const std::vector<Pose>& poses, double margin) {
-  Level& fine = fine_.front();
+cv::Mat RefineRun::derived_pixels(Renderer& renderer, const std::vector<Pose>& poses, double margin) {
+  const Level& fine = fine_.front();
   ObjectPixelsOptions po;
   po.margin = std::min(margin, 1.0);
   po.surface_search = std::min(0.5 * diameter_, 1.0);  // the object's surroundings, at its own scale
@@ -197,22 +199,48 @@ bool RefineRun::derive_pixels(Renderer& renderer, const std::vector<Pose>& poses
   po.holes_from_colour = true;
   if (fine.obs.has_box()) po.bounds = search_box(fine.obs.box);
   evaluations_ += long(poses.size());
-  const cv::Mat pixels = derive_object_pixels(fine.cam, fine.obs.depth,
-                                              renderer.render(fine.cam, mesh(), poses, cv::Mat()), po, fine.obs.rgb);
-  if (cv::countNonZero(pixels >= 0.5f) == 0) return false;
-  fine.obs.mask = pixels;
+  cv::Mat pixels = derive_object_pixels(fine.cam, fine.obs.depth, renderer.render(fine.cam, mesh(), poses, cv::Mat()),
+                                        po, fine.obs.rgb);
+  if (cv::countNonZero(pixels >= 0.5f) == 0) return cv::Mat();
+  return pixels;
+}
+
+bool RefineRun::derive_pixels(Renderer& renderer, const std::vector<Pose>& poses, double margin) {
+  const cv::Mat pixels = derived_pixels(renderer, poses, margin);
+  if (pixels.empty()) return false;
+  use_pixels(pixels);
+  return true;
+}
+
+void RefineRun::use_pixels(const cv::Mat& pixels) {
+  fine_.front().obs.mask = pixels;
   if (!coarse_.empty()) {
     Level& coarse = coarse_.front();
     cv::resize(pixels, coarse.obs.mask, cv::Size(coarse.cam.width, coarse.cam.height), 0, 0, cv::INTER_AREA);
   }
   pixels_changed_ = true;
-  return true;
 }
 
 void RefineRun::update_object_pixels(Renderer& renderer) {
   if (!derives_pixels_ || done_) return;
   const double reach = options_.no_mask_window * diameter_;
-  if (derivations_ == 0) {
+  if (derivations_ == 0 && weighs_given_mask_) {
+    ++derivations_;
+    // A segmenter's mask is evidence: its outline is taken as given only where depth puts the object's edge
+    // too. Otherwise the pixels derived from depth and colour replace it, as they stand in for a missing one.
+    const cv::Mat pixels = derived_pixels(renderer, initials_, std::max(reach, options_.inlier_threshold));
+    const double offset = pixels.empty() ? NAN : outline_offset(fine_.front().obs.mask, pixels);
+    if (!std::isnan(offset)) res_.given_mask_offset = offset;
+    if (!(offset > kTrustedOutlineOffset)) {
+      derives_pixels_ = false;
+      return;
+    }
+    res_.given_mask_replaced = true;
+    use_pixels(pixels);
+    loss_.weight_mask *= kDerivedMaskWeight;
+    scan_loss_.weight_mask *= kDerivedMaskWeight;
+    res_.loss_used.weight_mask *= kDerivedMaskWeight;
+  } else if (derivations_ == 0) {
     ++derivations_;
     if (derive_pixels(renderer, initials_, std::max(reach, options_.inlier_threshold))) return;
     // Nothing near the starts in depth: the window stays, and it is no observation of the silhouette.

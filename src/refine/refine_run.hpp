@@ -56,6 +56,11 @@ class RefineRun {
   /// derived silhouette is no independent observation, its pixels come from the depth the depth term already
   /// compares, so it counts half (on dev_ycb's easy starts 99.18 at a half, 98.93 in full, 98.94 without it).
   static constexpr double kDerivedMaskWeight = 0.5;
+  /// A given mask is taken as given when its outline lies on average within half a pixel, at the refining scale,
+  /// of the edge depth shows (outline_offset()): what rounding an outline to that grid leaves. Beyond it the
+  /// derived pixels replace the mask (derive_mask). Exact masks score 0-0.4 (a few up to 0.7), a segmenter's
+  /// outline 1-5 pixels off at full resolution from 0.4 up (docs/benchmarks.md).
+  static constexpr double kTrustedOutlineOffset = 0.5;
 
   /// Validates the input and prepares the scaled images, the loss and the learning rates. Throws
   /// std::invalid_argument on unusable input (as Refiner::refine()). `views`: one for an object; several share
@@ -138,12 +143,15 @@ class RefineRun {
   // Derived object pixels: whether they are derived, how often so far, the iteration of the second derivation,
   // and whether the runs' best losses (under the previous pixels) must be sought again.
   bool derives_pixels_ = false;
+  bool weighs_given_mask_ = false;  // a mask was given and depth can check it (derive_mask, one view)
   int derivations_ = 0;
   int rederive_at_ = 0;
   bool pixels_changed_ = false;
   /// derive_object_pixels() about `poses` within `margin` metres, at the fine scale and area-resized to the
   /// coarse one; false (the masks unchanged) when no pixel was found.
   bool derive_pixels(Renderer& renderer, const std::vector<Pose>& poses, double margin);
+  cv::Mat derived_pixels(Renderer& renderer, const std::vector<Pose>& poses, double margin);  // empty: none
+  void use_pixels(const cv::Mat& pixels);  // as the mask, at both scales
   double diameter_ = 1.0;
   RefineResult res_;
   std::vector<Pose> poses_, best_pose_, batch_;

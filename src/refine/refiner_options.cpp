@@ -161,7 +161,8 @@ const std::vector<OptionSpec<RefinerOptions>>& refiner_option_table() {
         option_row("no_mask_window", &O::no_mask_window, 0, 10, "",
                    "without a mask: how far the object may be from its start, as a fraction of its size"),
         option_row("derive_mask", &O::derive_mask, 0, 0, "",
-                   "without a mask, with depth: derive the object's pixels from depth near its render (false: a window)"),
+                   "with depth: derive the object's pixels near its render, without a mask, or to check a given one "
+                   "(false: a window; a mask as given)"),
         option_row("inlier_threshold", &O::inlier_threshold, 0, 10, " metres",
                    "a depth reading this near the render is an inlier (verdict, scores)", true),
         option_row("min_mask_iou", &O::min_mask_iou, 0, 1, "", "verdict: plausible needs at least this mask IoU"),

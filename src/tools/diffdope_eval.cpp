@@ -222,6 +222,7 @@ int main(int argc, char** argv) {
     if (!out) throw std::runtime_error(out_path + ": cannot write");
 
     std::vector<double> given_ious;  // --masks coarse: per result, the mask given against the visible one
+    int masks_checked = 0, masks_replaced = 0;  // given masks checked against depth, and replaced by its pixels
     std::map<std::string, LevelStats> stats;
     std::map<int, std::map<std::string, LevelStats>> object_stats;  // by obj_id, then level
     VerdictTally verdicts;
@@ -335,7 +336,10 @@ int main(int argc, char** argv) {
           line["polish_iterations"] = r.polish_iterations;
           line["newton_steps"] = r.newton_steps;
           line["given_mask_iou"] = mask_iou_given;  // the mask given against the visible one (-1: none given)
+          line["given_mask_offset"] = r.given_mask_offset;
+          line["given_mask_replaced"] = r.given_mask_replaced;
           if (masks == "coarse") given_ious.push_back(mask_iou_given);
+          masks_checked += r.given_mask_offset >= 0, masks_replaced += r.given_mask_replaced;
           line["print"] = {{"ncc", r.print.ncc}, {"best_ncc", r.print.best_ncc}, {"best_dx", r.print.best_dx},
                            {"best_dy", r.print.best_dy}, {"far_mean", r.print.far_mean}, {"far_std", r.print.far_std},
                            {"pixels", r.print.pixels}, {"render_contrast", r.print.render_contrast}};
@@ -405,6 +409,10 @@ int main(int argc, char** argv) {
                    hi = given_ious[given_ious.size() * 9 / 10];
       std::printf("masks given: IoU with the visible masks, median %.3f (10-90 %%: %.3f-%.3f)\n", mid, lo, hi);
       summary["given_mask_iou"] = {{"median", mid}, {"p10", lo}, {"p90", hi}};
+    }
+    if (masks_checked > 0) {
+      std::printf("masks given: %d of %d checked against depth replaced by its pixels\n", masks_replaced, masks_checked);
+      summary["given_masks"] = {{"checked", masks_checked}, {"replaced", masks_replaced}};
     }
     if (!summary_path.empty()) std::ofstream(summary_path) << summary.dump(2) << "\n";
     if (all_ref.empty() && (skipped_scenes > 0 || skipped_files > 0))

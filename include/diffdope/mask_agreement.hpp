@@ -1,0 +1,24 @@
+#pragma once
+// How well a given object mask (a segmenter's) agrees with the object's pixels that depth and colour show
+// (derive_object_pixels()): what the refiner measures to decide whether a mask's outline can be taken as given.
+#include <opencv2/core.hpp>
+
+namespace diffdope {
+
+/// A pixel of the mask's outline counts at most this far (pixels) from the reference's: a blob, or a stretch of
+/// outline the depth cannot see (a dark or shiny edge, the foot on a table), weighs no more than a clear miss.
+constexpr double kOutlineOffsetCap = 3.0;
+
+/// The mean distance (pixels, each capped at kOutlineOffsetCap) from the outline of `mask` to the outline of
+/// `reference`. Both are single-channel images of one size, inside at >= 0.5 (CV_8U: >= 128). The mask's
+/// outline is its pixels with a 4-neighbour outside. The reference's outline is both pixels of the pair that
+/// straddles its edge: the last inside and the first outside. Depth's own edge is only known to that pair, since
+/// readings there mix the object and what lies behind it. Where the image's border cuts a set there is no
+/// outline. An exact mask gives about 0; a segmenter's outline grown or shrunk by k pixels about k, give or take
+/// the straddling pixel, or the cap. With `depth` (CV_32FC1 metres, 0 = no reading) only the mask's outline
+/// pixels with a reading at and around them count: in a hole (dark or shiny edges, a sensor's dropout at
+/// silhouettes) the reference's edge is a guess. Returns NaN when no outline pixel counts, infinity when the
+/// reference has no outline. Throws std::invalid_argument when the images differ in size or type.
+double outline_offset(const cv::Mat& mask, const cv::Mat& reference, const cv::Mat& depth = cv::Mat());
+
+}  // namespace diffdope

@@ -1,0 +1,83 @@
+// outline_offset(): how far a given mask's outline lies from a reference's (the pixels depth shows), the measure
+// by which the refiner takes a segmenter's mask as given or replaces it.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <opencv2/imgproc.hpp>
+
+#include "diffdope/mask_agreement.hpp"
+
+using namespace diffdope;
+
+namespace {
+cv::Mat ellipse_mask() {
+  cv::Mat m = cv::Mat::zeros(120, 160, CV_32F);
+  cv::ellipse(m, cv::Point(80, 60), cv::Size(40, 25), 15, 0, 360, cv::Scalar(1), cv::FILLED);
+  return m;
+}
+cv::Mat moved(const cv::Mat& m, int pixels) {  // grown (> 0) or shrunk (< 0) by |pixels|
+  cv::Mat out;
+  const cv::Mat disc = cv::getStructuringElement(cv::MORPH_ELLIPSE, cv::Size(2 * std::abs(pixels) + 1, 2 * std::abs(pixels) + 1));
+  if (pixels > 0) cv::dilate(m, out, disc);
+  else cv::erode(m, out, disc);
+  return out;
+}
+}  // namespace
+
+TEST(MaskAgreement, AnExactOutlineScoresZeroAgainstTheStraddlingPixels) {
+  const cv::Mat exact = ellipse_mask();
+  EXPECT_DOUBLE_EQ(outline_offset(exact, exact), 0.0);
+  // Depth's pixels a pixel short of the object (mixed readings at the edge) straddle the same edge; a pixel
+  // beyond it is a pixel off.
+  EXPECT_LT(outline_offset(exact, moved(exact, -1)), 0.1);
+  EXPECT_NEAR(outline_offset(exact, moved(exact, 1)), 1.0, 0.1);
+  // An 8-bit mask reads the same as a float one.
+  cv::Mat exact8;
+  exact.convertTo(exact8, CV_8U, 255);
+  EXPECT_DOUBLE_EQ(outline_offset(exact8, exact), 0.0);
+}
+
+TEST(MaskAgreement, AGrownOrShrunkOutlineScoresItsShiftUpToTheCap) {
+  const cv::Mat exact = ellipse_mask();
+  for (int k : {2, 3}) {
+    EXPECT_NEAR(outline_offset(moved(exact, k), exact), k - 0.5, 0.6) << "grown by " << k;
+    EXPECT_NEAR(outline_offset(moved(exact, -k), exact), k - 0.5, 0.6) << "shrunk by " << k;
+  }
+  EXPECT_DOUBLE_EQ(outline_offset(moved(exact, 10), exact), kOutlineOffsetCap);
+  // A blob taken in raises the mean only by its share of the outline.
+  cv::Mat blob = exact.clone();
+  cv::circle(blob, cv::Point(120, 60), 6, cv::Scalar(1), cv::FILLED);
+  EXPECT_GT(outline_offset(blob, exact), 0.05);
+  EXPECT_LT(outline_offset(blob, exact), 0.5);
+}
+
+TEST(MaskAgreement, TheImagesBorderIsNoOutline) {
+  cv::Mat m = cv::Mat::zeros(60, 80, CV_32F), r;
+  m(cv::Rect(0, 0, 40, 60)).setTo(1);  // the left half, cut by the frame on three sides
+  r = m.clone();
+  EXPECT_DOUBLE_EQ(outline_offset(m, r), 0.0);
+  r(cv::Rect(0, 0, 40, 60)).setTo(0);
+  r(cv::Rect(0, 0, 39, 60)).setTo(1);
+  EXPECT_DOUBLE_EQ(outline_offset(m, r), 0.0);  // within the straddling pixel
+}
+
+TEST(MaskAgreement, NoOutlineOrMismatchedImages) {
+  const cv::Mat exact = ellipse_mask();
+  EXPECT_TRUE(std::isnan(outline_offset(cv::Mat::zeros(120, 160, CV_32F), exact)));
+  EXPECT_TRUE(std::isinf(outline_offset(exact, cv::Mat::zeros(120, 160, CV_32F))));
+  EXPECT_THROW(outline_offset(exact, cv::Mat::zeros(60, 80, CV_32F)), std::invalid_argument);
+  EXPECT_THROW(outline_offset(cv::Mat::zeros(120, 160, CV_32FC3), exact), std::invalid_argument);
+  EXPECT_THROW(outline_offset(exact, exact, cv::Mat::ones(120, 160, CV_16U)), std::invalid_argument);
+  EXPECT_THROW(outline_offset(exact, exact, cv::Mat::ones(60, 80, CV_32F)), std::invalid_argument);
+  EXPECT_TRUE(std::isnan(outline_offset(exact, exact, cv::Mat::zeros(120, 160, CV_32F))));  // nothing read
+}
+
+TEST(MaskAgreement, OnlyWhereDepthReadsAroundTheOutline) {
+  const cv::Mat exact = ellipse_mask();
+  // The mask grown by 3 pixels on its right half; there the depth has a hole along the edge.
+  cv::Mat given = exact.clone(), depth(120, 160, CV_32F, cv::Scalar(1.0f));
+  moved(exact, 3)(cv::Rect(80, 0, 80, 120)).copyTo(given(cv::Rect(80, 0, 80, 120)));
+  EXPECT_GT(outline_offset(given, exact), 0.8);
+  depth(cv::Rect(82, 0, 78, 120)).setTo(0);
+  EXPECT_LT(outline_offset(given, exact, depth), 0.1);
+}
