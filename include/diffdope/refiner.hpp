@@ -201,7 +201,7 @@ struct RefineResult {
   int start = 0;                      // index of the initial pose the winning run started from
   int scan_turns = 0;                 // candidates the shape scan (explore_tolerance) added: runs from turned poses
   bool scan_taken = false;            // the result is such a candidate, not the start's own basin (the evidence
-                                      // was clear: jump_is_supported() in src/core/refine_run.hpp)
+                                      // was clear: jump_is_supported() in src/refine/refine_run.hpp)
   double print_turn = 0;              // radians the print alignment (print_search) turned the result by (0: none;
                                       // the sum of both turns' angles when it ran again after the Newton
                                       // steps); a turn may raise the loss up to kPrintLossTolerance (2 %) above
