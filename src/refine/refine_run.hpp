@@ -58,8 +58,7 @@ class RefineRun {
   static constexpr double kDerivedMaskWeight = 0.5;
   /// A given mask is taken as given when its outline lies on average within half a pixel, at the refining scale,
   /// of the edge depth shows (outline_offset()): what rounding an outline to that grid leaves. Beyond it the
-  /// derived pixels replace the mask (derive_mask). Exact masks score 0-0.4 (a few up to 0.7), a segmenter's
-  /// outline 1-5 pixels off at full resolution from 0.4 up (docs/benchmarks.md).
+  /// derived pixels replace the mask (derive_mask). How exact and segmenter-like masks score: docs/benchmarks.md.
   static constexpr double kTrustedOutlineOffset = 0.5;
 
   /// Validates the input and prepares the scaled images, the loss and the learning rates. Throws
