@@ -50,13 +50,17 @@ double outline_offset(const cv::Mat& mask, const cv::Mat& reference, const cv::M
   }
   const cv::Mat ref = inside(reference);
   const cv::Mat to = outline(ref, false) | outline(ref, true);
-  const int n = cv::countNonZero(from);
-  if (n == 0) return std::numeric_limits<double>::quiet_NaN();
+  if (cv::countNonZero(from) == 0) return std::numeric_limits<double>::quiet_NaN();
   if (cv::countNonZero(to) == 0) return std::numeric_limits<double>::infinity();
   cv::Mat distance;
   cv::distanceTransform(~to, distance, cv::DIST_L2, cv::DIST_MASK_PRECISE);
+  // Beyond twice the cap the reference has no edge near: it ran on into a neighbour at the object's depth. Such
+  // pixels say nothing about the outline; nearer ones count, up to the cap.
+  const cv::Mat near = from & (distance < 2 * kOutlineOffsetCap);
+  const int m = cv::countNonZero(near);
+  if (m == 0) return std::numeric_limits<double>::quiet_NaN();
   cv::min(distance, kOutlineOffsetCap, distance);
-  return cv::sum(distance.setTo(0, ~from))[0] / n;
+  return cv::sum(distance.setTo(0, ~near))[0] / m;
 }
 
 }  // namespace diffdope
