@@ -11,8 +11,8 @@ constexpr double kOutlineOffsetCap = 3.0;
 
 /// The mean distance (pixels, each capped at kOutlineOffsetCap) from the outline of `mask` to the outline of
 /// `reference`, over the outline pixels within twice the cap of it: farther, the reference ran on into a
-/// neighbour at the object's depth, and says nothing about the outline there. Both are single-channel images of one size, inside at >= 0.5 (CV_8U: >= 128). The mask's
-/// outline is its pixels with a 4-neighbour outside. The reference's outline is both pixels of the pair that
+/// neighbour at the object's depth, and says nothing about the outline there. Both are single-channel images of
+/// one size, inside at >= 0.5 (CV_8U: >= 128). The mask's outline is its pixels with a 4-neighbour outside. The reference's outline is both pixels of the pair that
 /// straddles its edge: the last inside and the first outside. Depth's own edge is only known to that pair, since
 /// readings there mix the object and what lies behind it. Where the image's border cuts a set there is no
 /// outline. An exact mask gives about 0; a segmenter's outline grown or shrunk by k pixels about k, give or take
