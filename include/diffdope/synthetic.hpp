@@ -1,6 +1,7 @@
 #pragma once
 // Synthetic observations for tests, the demo and the dataset generator: an object rendered over a textured
-// background plane, with sensor-like noise (colour noise, depth noise growing with z^2, depth holes).
+// background plane, with sensor-like noise (colour noise, depth noise growing with z^2, depth holes, flying
+// pixels).
 #include <cstdint>
 #include <random>
 
@@ -12,7 +13,14 @@ namespace diffdope {
 struct SyntheticNoise {
   double rgb_sigma = 0.02;         // colour noise, [0, 1] units
   double depth_sigma_at_1m = 0.002;  // depth noise (metres) at 1 m, grows with z^2
+  /// The depth noise's grain: 0 = independent per pixel; g > 0 = smoothed over g pixels (a Gaussian's sigma) and
+  /// rescaled to keep depth_sigma_at_1m per pixel, as a stereo camera's matching window correlates its errors
+  /// (averaging a few pixels then leaves most of the noise, as on a real camera).
+  double depth_noise_grain_px = 0;
   double hole_fraction = 0.05;     // fraction of depth pixels without a reading (blobs)
+  /// Fraction of the objects' silhouette-border pixels that read a depth between the surface in front and the
+  /// one behind (a stereo or time-of-flight sensor's mixed pixels), uniformly; the others read none.
+  double flying_pixel_fraction = 0;
   double background_depth = 0.9;   // metres: a plane behind the object
   double brightness = 1.0;         // multiplies the object's colours (lighting mismatch)
 };

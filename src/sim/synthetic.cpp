@@ -28,6 +28,7 @@ SyntheticScene synthesize_scene(Renderer& renderer, const Camera& cam, const std
     out.full_masks.back().convertTo(out.full_masks.back(), CV_32F);
   }
   std::normal_distribution<float> n01(0.f, 1.f);
+  cv::Mat clean_depth(cam.height, cam.width, CV_32FC1);  // before noise: the surfaces flying pixels mix
   std::vector<int> order(n);
   for (int y = 0; y < cam.height; ++y) {
     for (int x = 0; x < cam.width; ++x) {
@@ -56,11 +57,24 @@ SyntheticScene synthesize_scene(Renderer& renderer, const Camera& cam, const std
           break;
         }
       }
+      clean_depth.at<float>(y, x) = z;
       out.depth.at<float>(y, x) = z + float(noise.depth_sigma_at_1m) * z * z * n01(rng);
     }
   }
+  if (noise.depth_noise_grain_px > 0) {  // grained noise instead: a smoothed field with unit variance per pixel
+    cv::Mat field(cam.height, cam.width, CV_32F);
+    std::mt19937 grain_rng(seed + 7919);
+    for (int y = 0; y < cam.height; ++y)
+      for (int x = 0; x < cam.width; ++x) field.at<float>(y, x) = n01(grain_rng);
+    const double g = noise.depth_noise_grain_px;
+    const cv::Mat k = cv::getGaussianKernel(2 * int(std::ceil(3 * g)) + 1, g, CV_64F);
+    cv::sepFilter2D(field, field, CV_32F, k, k, cv::Point(-1, -1), 0, cv::BORDER_REFLECT);
+    const double kk = k.dot(k);  // the smoothed field's variance is (sum of squared weights)^2, separably
+    field *= 1.0 / kk;
+    out.depth = clean_depth + float(noise.depth_sigma_at_1m) * clean_depth.mul(clean_depth).mul(field);
+  }
   // Holes: random blobs, and the objects' silhouette borders (where real sensors fail most).
-  cv::Mat holes = cv::Mat::zeros(cam.height, cam.width, CV_8U);
+  cv::Mat holes = cv::Mat::zeros(cam.height, cam.width, CV_8U), borders = holes.clone();
   std::uniform_real_distribution<float> U(0.f, 1.f);
   const double target = noise.hole_fraction * cam.width * cam.height;
   for (int i = 0; i < 1000 && cv::countNonZero(holes) < target; ++i)
@@ -69,9 +83,22 @@ SyntheticScene synthesize_scene(Renderer& renderer, const Camera& cam, const std
   for (const RenderImage& img : imgs) {
     cv::Mat covered = img.coverage > 0.f, inner;
     cv::erode(covered, inner, cv::Mat::ones(3, 3, CV_8U));
-    holes |= covered & ~inner;
+    borders |= covered & ~inner;
   }
-  out.depth.setTo(0.f, holes);
+  out.depth.setTo(0.f, holes | borders);
+  if (noise.flying_pixel_fraction > 0) {
+    // A mixed reading lies anywhere between the nearest and the farthest surface around the pixel.
+    cv::Mat near_z, far_z;
+    cv::erode(clean_depth, near_z, cv::Mat::ones(3, 3, CV_8U));
+    cv::dilate(clean_depth, far_z, cv::Mat::ones(3, 3, CV_8U));
+    for (int y = 0; y < cam.height; ++y)
+      for (int x = 0; x < cam.width; ++x) {
+        if (!borders.at<uchar>(y, x) || holes.at<uchar>(y, x) || U(rng) >= noise.flying_pixel_fraction) continue;
+        const float a = near_z.at<float>(y, x), b = far_z.at<float>(y, x);
+        const float z = a + U(rng) * (b - a);
+        out.depth.at<float>(y, x) = z + float(noise.depth_sigma_at_1m) * z * z * n01(rng);
+      }
+  }
   for (size_t i = 0; i < n; ++i) {
     const double full = cv::countNonZero(out.full_masks[i]);
     out.visible_fraction.push_back(full > 0 ? cv::countNonZero(out.visible_masks[i]) / full : 0.0);

@@ -2,7 +2,8 @@
 // of it at known joint positions (include/diffdope/calibration.hpp), everything read from files.
 //   diffdope_calibrate --urdf FILE --captures DIR --camera FILE --init FILE --out DIR [options]
 //   diffdope_calibrate --generate DIR [--count N] [--seed S] [--init-error CM DEG] [--no-mask] [--no-rgb]
-//                      [--no-table] [--eye-in-hand link5]
+//                      [--no-table] [--eye-in-hand link5] [--depth-noise MM] [--noise-grain PX]
+//                      [--holes F] [--flying-pixels F]
 // Writes DIR/calibration.yaml (easy_handeye's layout), DIR/calibration.launch (a static_transform_publisher),
 // DIR/result.json, DIR/residuals.txt and DIR/overlay_<capture>.png. Every unusable input is one line
 // `diffdope_calibrate: <file>: <problem>` with exit code 1; command-line mistakes print the usage, exit code 2.
@@ -47,7 +48,8 @@ const char* kUsage =
     "                          [--mask-margin M] [--eye-in-hand LINK] [--robot-base-frame NAME]\n"
     "                          [--camera-frame NAME] [--truth FILE] [--quiet]\n"
     "       diffdope_calibrate --generate DIR [--count N] [--seed S] [--init-error CM DEG] [--no-mask] [--no-rgb]\n"
-    "                                                 [--no-table] [--eye-in-hand link5]\n"
+    "                                                 [--no-table] [--eye-in-hand link5] [--depth-noise MM]\n"
+    "                                                 [--noise-grain PX] [--holes F] [--flying-pixels F]\n"
     "\n"
     "  --urdf FILE            the robot (meshes: STL, DAE, OBJ, PLY...; package:// paths, see --package-path)\n"
     "  --captures DIR         one folder per capture (in name order), each with depth.png (16-bit, millimetres;\n"
@@ -73,7 +75,13 @@ const char* kUsage =
     "  --quiet                no progress on the terminal\n"
     "  --generate DIR         writes a generated arm, N captures of it (default 3), camera.json, init.json (the\n"
     "                         truth moved by --init-error, default 5 cm 10 deg) and truth.json, then exits;\n"
-    "                         the arm stands on a table with a box and a can beside it (--no-table: alone)\n";
+    "                         the arm stands on a table with a box and a can beside it (--no-table: alone)\n"
+    "  --depth-noise MM       the generated depth's noise at 1 m, growing with z^2 (default 2; a RealSense\n"
+    "                         D435 is about 3-8)\n"
+    "  --noise-grain PX       the depth noise correlated over PX pixels, as a stereo camera's (default 0:\n"
+    "                         independent per pixel)\n"
+    "  --holes F              the share of depth pixels in dropout holes (default 0.05)\n"
+    "  --flying-pixels F      the share of silhouette-border pixels with a mixed depth (default 0: none)\n";
 
 int usage_error(const std::string& what) {
   std::cerr << "diffdope_calibrate: " << what << "\n" << kUsage;
@@ -357,6 +365,18 @@ int main(int argc, char** argv) {
         gen.init_deg = parse_number_arg(k, argv[++i]);
         if (gen.init_cm < 0 || gen.init_deg < 0 || gen.init_cm > 100 || gen.init_deg > 90)
           return usage_error("--init-error: CM in [0, 100], DEG in [0, 90]");
+      } else if (k == "--depth-noise") {
+        gen.depth_sigma_at_1m = 0.001 * parse_number_arg(k, v);
+        if (!(gen.depth_sigma_at_1m >= 0 && gen.depth_sigma_at_1m <= 0.05))
+          return usage_error("--depth-noise: millimetres at 1 m in [0, 50]");
+      } else if (k == "--noise-grain") {
+        gen.depth_noise_grain_px = parse_number_arg(k, v);
+        if (!(gen.depth_noise_grain_px >= 0 && gen.depth_noise_grain_px <= 10))
+          return usage_error("--noise-grain: pixels in [0, 10]");
+      } else if (k == "--holes" || k == "--flying-pixels") {
+        double& f = k == "--holes" ? gen.hole_fraction : gen.flying_pixel_fraction;
+        f = parse_number_arg(k, v);
+        if (!(f >= 0 && f <= 1)) return usage_error(k + ": a fraction in [0, 1]");
       } else return usage_error("unknown option '" + k + "'");
     }
     if (!(a.depth_scale > 0)) return usage_error("--depth-scale must be positive");
