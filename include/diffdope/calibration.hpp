@@ -62,7 +62,8 @@ struct CaptureResidual {
   std::string name;
   double loss = 0;           // the refiner's loss of this capture at the result
   double mask_iou = -1;      // rendered robot against the (given or derived) mask
-  double depth_inliers = -1; // fraction of robot pixels whose depth is within inlier_threshold of the render
+  double depth_inliers = -1; // fraction of robot pixels whose depth is within the noise's band of the render
+  double depth_noise_mm = -1; // the depth noise measured against the render, millimetres at 1 m (z^2 growth)
   double depth_median_mm = -1;  // median |observed - rendered| depth over robot pixels both see, millimetres
   bool derived_mask = false; // the mask came from depth and the initial guess
 };

@@ -129,8 +129,14 @@ struct RefinerOptions {
   /// (RefineResult::given_mask_replaced). false: a mask is taken as given, and without one the window alone
   /// stands in (a table or a neighbour inside it then pulls the render onto itself).
   bool derive_mask = true;
-  /// Quality: a depth reading within this distance (metres) of the render is an inlier.
+  /// Quality: a depth reading within this distance (metres) of the render is an inlier, at least; the verdict
+  /// widens the band to three times the depth noise it measures (depth_agreement() in verdict.hpp).
   double inlier_threshold = 0.01;  // (0, 10]
+  /// The noisiest depth the verdict excuses: the noise's standard deviation at 1 m (metres; it grows with z^2).
+  /// Measured noise beyond it counts as disagreement (about twice it leaves fewer than min_depth_inliers' 0.8
+  /// inside the band). 0.01 is the RealSense D400 series' specified RMS error (2 % at 2 m, Intel's datasheet);
+  /// 0 = a fixed band of inlier_threshold.
+  double max_depth_noise = 0.01;  // [0, 1]
   /// Verdict thresholds (verdict.hpp): plausible when mask IoU >= min_mask_iou (if a mask was given or derived), the depth
   /// inlier fraction >= min_depth_inliers (if depth was given) and the print lines up with the image's at least
   /// min_print_significance standard deviations above its chance level (if the model has a print and rgb was
@@ -142,8 +148,7 @@ struct RefinerOptions {
   /// The shape's bars say that a fifth of the evidence disagreeing contradicts the pose: results 12-185 mm off
   /// that kept much of their outline (a tilted cylinder, a box turned into a look-alike outline) fall to 0.66-0.75
   /// on mask or depth, right ones score 0.9-1 with an exact mask and depth within inlier_threshold
-  /// (docs/benchmarks.md, "The verdict"). Lower min_mask_iou for a coarse detector mask; raise inlier_threshold
-  /// for depth noisier than a third of it.
+  /// (docs/benchmarks.md, "The verdict"). Lower min_mask_iou for a coarse detector mask.
   double min_mask_iou = 0.8;       // [0, 1]
   double min_depth_inliers = 0.8;  // [0, 1]
   double min_print_significance = 1.0;  // [0, 100]
@@ -225,7 +230,10 @@ struct RefineResult {
   bool given_mask_replaced = false;   // that offset exceeded half a pixel: the derived pixels stood in for the
                                       // mask in the loss, the later steps and the verdict
   double depth_inliers = -1;          // fraction of object pixels (observed or derived mask, else the render's) with a depth
-                                      // reading within inlier_threshold of the render; -1 without depth
+                                      // reading within the noise's band of the render (depth_agreement()); -1
+                                      // without depth
+  double depth_noise = -1;            // the depth noise measured against the render (metres at 1 m; the
+                                      // noisiest view's); -1 without depth
   bool converged = false;             // the winner's loss stopped improving (relative change < 1 % over the last 10 %)
   bool plausible = false;             // every available score passes its threshold in RefinerOptions
   bool judged = false;                // some score could judge the pose (not so: colour alone without a mask, on
@@ -241,7 +249,7 @@ struct RefineResult {
   std::string error;                  // why the input could not be refined (empty = refined; then pose = the start)
   /// refine_views(): each view's scores at the result (loss at image_scale; -1 = not available).
   struct ViewScores {
-    double loss = 0, mask_iou = -1, depth_inliers = -1;
+    double loss = 0, mask_iou = -1, depth_inliers = -1, depth_noise = -1;
   };
   std::vector<ViewScores> view_scores;
 };

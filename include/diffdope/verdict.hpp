@@ -38,6 +38,30 @@ constexpr double kMinPrintContrast = 0.05;
 PrintRegistration register_print(const cv::Mat& observed_rgb, const cv::Mat& rendered_rgb, const cv::Mat& interior,
                                  int radius = 8, double epsilon = 0.03, int min_pixels = 50);
 
+/// How an observed depth agrees with a render, judged against the sensor's own noise. Depth noise grows with z^2
+/// (stereo and structured light: sigma(z) = sigma1 z^2). sigma1 is measured per image from the residuals
+/// observed - rendered over the object's readings: 1.4826 x the median of |residual - their median| / z^2 (z the
+/// render's depth), then again over the readings within the band that gives. The median leaves a bias out of
+/// the scale, and the second round the readings far off (a wrong silhouette's misses): disagreement counts
+/// against the band, the noise widens it. A reading is an inlier within max(min_band, kDepthNoiseBand x
+/// min(sigma1, max_noise_at_1m) x z^2) of the render: never tighter than min_band (a mesh's own error, the depth's
+/// quantisation), and never wider than the noisiest camera excused allows.
+struct DepthAgreement {
+  /// Fraction of the object's observed readings within the band of the render, in [0, 1] (a reading where the
+  /// render has no depth is outside); -1 without observed readings.
+  double inliers = -1;
+  double noise_at_1m = -1;  // sigma1 as measured (metres at 1 m), before the cap; -1 without readings
+  int readings = 0;         // the object's pixels with both an observed and a rendered depth (sigma1's sample)
+};
+
+/// Half-width of the inlier band in the noise's standard deviations: noise alone leaves 99.7 % inside (Gaussian).
+constexpr double kDepthNoiseBand = 3.0;
+
+/// `observed`, `rendered`: CV_32F depth (metres; <= 0 or NaN: no reading); `object`: CV_8U, nonzero where the
+/// object is (observed mask, derived pixels, or the render's coverage). min_band, max_noise_at_1m in metres.
+DepthAgreement depth_agreement(const cv::Mat& observed, const cv::Mat& rendered, const cv::Mat& object,
+                               double min_band, double max_noise_at_1m);
+
 /// What the verdict weighs; each is optional.
 struct VerdictEvidence {
   double mask_iou = -1;       // -1: no observed mask

@@ -2,6 +2,7 @@
 #include "diffdope/calibration.hpp"
 
 #include "diffdope/input_limits.hpp"
+#include "diffdope/object_pixels.hpp"
 
 #include <opencv2/imgproc.hpp>
 
@@ -16,6 +17,11 @@
 #include "base/option_range.hpp"
 
 namespace diffdope {
+namespace {
+
+double millimetres_or_unknown(double metres) { return metres < 0 ? -1.0 : 1e3 * metres; }
+
+}  // namespace
 
 RefinerOptions CalibrationOptions::default_refiner() {
   RefinerOptions o;
@@ -128,8 +134,9 @@ CalibrationResult Calibrator::calibrate(const RobotModel& robot, const std::vect
     refiner_.on_iteration = nullptr;
     if (on_iteration)
       refiner_.on_iteration = [this, pass](int k, int total, double loss) { on_iteration(pass, k, total, loss); };
-    RefineResult r = refiner_.refine_views(views, {from}, centre,
-                                           pass_options(pass, (from * centre).norm(), captures.front().camera));
+    RefinerOptions pass_refiner = pass_options(pass, (from * centre).norm(), captures.front().camera);
+    if (!with_masks) pass_refiner.loss.weight_mask *= kDerivedMaskWeight;
+    RefineResult r = refiner_.refine_views(views, {from}, centre, pass_refiner);
     if (!r.error.empty()) {
       if (pass == 0) throw std::invalid_argument("calibrate: " + r.error);
       // The pass before drove the robot out of view: its result stands, judged a divergence.
@@ -153,10 +160,12 @@ CalibrationResult Calibrator::calibrate(const RobotModel& robot, const std::vect
       r.loss = out.refine.view_scores[k].loss;
       r.mask_iou = out.refine.view_scores[k].mask_iou;
       r.depth_inliers = out.refine.view_scores[k].depth_inliers;
+      r.depth_noise_mm = millimetres_or_unknown(out.refine.view_scores[k].depth_noise);
     } else {  // one capture: the result's own scores
       r.loss = out.refine.loss.total;
       r.mask_iou = out.refine.mask_iou;
       r.depth_inliers = out.refine.depth_inliers;
+      r.depth_noise_mm = millimetres_or_unknown(out.refine.depth_noise);
     }
     const Camera cam = scale == 1.0 ? views[k].camera : views[k].camera.scaled(scale);
     const Observation obs = scale == 1.0 ? views[k].observed : views[k].observed.resized(cam);

@@ -311,12 +311,11 @@ int RefineRun::score_views(Renderer& renderer, RefineResult& res) const {
     }
     if (obs.has_depth()) {
       // Over the observed object, or (without a mask) over what the render covers: the window is not the object.
-      const cv::Mat object = (has_mask_ ? cv::Mat(obs.mask >= 0.5f) : rendered) & (obs.depth > 0);
-      const int n = cv::countNonZero(object);
-      cv::Mat diff;
-      cv::absdiff(obs.depth, img.depth, diff);
-      const cv::Mat inlier = object & (img.depth > 0) & (diff < options_.inlier_threshold);
-      scores.depth_inliers = n > 0 ? double(cv::countNonZero(inlier)) / n : 0.0;
+      const cv::Mat object = has_mask_ ? cv::Mat(obs.mask >= 0.5f) : rendered;
+      const DepthAgreement agreement =
+          depth_agreement(obs.depth, img.depth, object, options_.inlier_threshold, options_.max_depth_noise);
+      scores.depth_inliers = std::max(agreement.inliers, 0.0);
+      scores.depth_noise = agreement.noise_at_1m;
     }
     if (one_view && obs.has_rgb()) res.print = register_render(img);
     if (!one_view) {
@@ -328,6 +327,7 @@ int RefineRun::score_views(Renderer& renderer, RefineResult& res) const {
     const auto weakest = [](double a, double b) { return a < 0 ? b : b < 0 ? a : std::min(a, b); };
     res.mask_iou = v == 0 ? scores.mask_iou : weakest(res.mask_iou, scores.mask_iou);
     res.depth_inliers = v == 0 ? scores.depth_inliers : weakest(res.depth_inliers, scores.depth_inliers);
+    res.depth_noise = std::max(res.depth_noise, scores.depth_noise);
     if (!one_view) res.view_scores.push_back(scores);
   }
   return rendered_pixels;

@@ -52,10 +52,6 @@ class RefineRun {
   /// this many nats: half the pose's six degrees of freedom, what fitting them to noise alone gains on average.
   /// A move within the loss's noise keeps the pose the descent left, the one nearer the start.
   static constexpr double kNewtonEvidence = 3.0;
-  /// The mask term's share of its weight (LossOptions::weight_mask) when the mask is derived (derive_mask): the
-  /// derived silhouette is no independent observation, its pixels come from the depth the depth term already
-  /// compares, so it counts half (on dev_ycb's easy starts 99.18 at a half, 98.93 in full, 98.94 without it).
-  static constexpr double kDerivedMaskWeight = 0.5;
   /// A given mask is taken as given when its outline lies on average within half a pixel, at the refining scale,
   /// of the edge depth shows (outline_offset()): what rounding an outline to that grid leaves. Beyond it the
   /// derived pixels replace the mask (derive_mask). How exact and segmenter-like masks score: docs/benchmarks.md.

@@ -164,7 +164,9 @@ const std::vector<OptionSpec<RefinerOptions>>& refiner_option_table() {
                    "with depth: derive the object's pixels near its render, without a mask, or to check a given one "
                    "(false: a window; a mask as given)"),
         option_row("inlier_threshold", &O::inlier_threshold, 0, 10, " metres",
-                   "a depth reading this near the render is an inlier (verdict, scores)", true),
+                   "a depth reading this near the render is an inlier, at least (verdict, scores)", true),
+        option_row("max_depth_noise", &O::max_depth_noise, 0, 1, " metres at 1 m (0: a fixed band)",
+                   "verdict: the noisiest depth excused; the inlier band is 3x the noise measured, up to this"),
         option_row("min_mask_iou", &O::min_mask_iou, 0, 1, "", "verdict: plausible needs at least this mask IoU"),
         option_row("min_depth_inliers", &O::min_depth_inliers, 0, 1, "",
                    "verdict: plausible needs at least this fraction of depth inliers"),

@@ -67,6 +67,64 @@ PrintRegistration register_print(const cv::Mat& observed_rgb, const cv::Mat& ren
   return out;
 }
 
+DepthAgreement depth_agreement(const cv::Mat& observed, const cv::Mat& rendered, const cv::Mat& object,
+                               double min_band, double max_noise_at_1m) {
+  DepthAgreement out;
+  if (observed.empty() || observed.size() != rendered.size() || observed.size() != object.size() ||
+      observed.type() != CV_32F || rendered.type() != CV_32F || object.type() != CV_8U)
+    return out;
+  std::vector<float> residual, z2;  // observed - rendered (metres) and z^2, where both have a depth
+  long unrendered = 0;  // observed readings of the object where the render has none: outliers
+  for (int y = 0; y < observed.rows; ++y) {
+    const float* o = observed.ptr<float>(y);
+    const float* r = rendered.ptr<float>(y);
+    const uchar* m = object.ptr<uchar>(y);
+    for (int x = 0; x < observed.cols; ++x) {
+      if (!m[x] || !(o[x] > 0.f) || !std::isfinite(o[x])) continue;
+      if (!(r[x] > 0.f)) {
+        ++unrendered;
+        continue;
+      }
+      residual.push_back(o[x] - r[x]);
+      z2.push_back(r[x] * r[x]);
+    }
+  }
+  out.readings = int(residual.size());
+  if (residual.empty()) {
+    if (unrendered > 0) out.inliers = 0;
+    return out;
+  }
+  const auto median = [](std::vector<float> v) {
+    std::nth_element(v.begin(), v.begin() + long(v.size() / 2), v.end());
+    return double(v[v.size() / 2]);
+  };
+  // The median absolute deviation of the residuals about their median, each over its z^2; then again over the
+  // readings within the band that gives: readings far off (a silhouette's misses, all on one side) move the
+  // first median and widen the first scale (by 2x with a third of them); once left out, the scale is the noise's.
+  std::vector<size_t> kept(residual.size());
+  for (size_t i = 0; i < kept.size(); ++i) kept[i] = i;
+  std::vector<float> values, deviation;
+  for (int round = 0; round < 2; ++round) {
+    values.clear();
+    for (size_t i : kept) values.push_back(residual[i]);
+    const double centre = median(values);
+    deviation.clear();
+    for (size_t i : kept) deviation.push_back(float(std::abs(residual[i] - centre) / z2[i]));
+    out.noise_at_1m = 1.4826 * median(deviation);
+    std::vector<size_t> inside;
+    for (size_t k = 0; k < kept.size(); ++k)
+      if (deviation[k] <= kDepthNoiseBand * out.noise_at_1m) inside.push_back(kept[k]);
+    if (inside.size() < kept.size() / 2 || inside.size() == kept.size()) break;
+    kept.swap(inside);
+  }
+  const double band_at_1m = kDepthNoiseBand * std::min(out.noise_at_1m, std::max(max_noise_at_1m, 0.0));
+  int inliers = 0;
+  for (size_t i = 0; i < residual.size(); ++i)
+    inliers += std::abs(residual[i]) < std::max(min_band, band_at_1m * z2[i]);
+  out.inliers = double(inliers) / double(residual.size() + size_t(unrendered));
+  return out;
+}
+
 namespace {
 
 /// A fraction in [0, 1] against its threshold t: 0.5 at t, 1 at 1, linear on either side.

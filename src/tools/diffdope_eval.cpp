@@ -326,6 +326,7 @@ int main(int argc, char** argv) {
                                  {"mask_iou", r.mask_iou}, {"plausible", r.plausible}, {"judged", r.judged},
                                  {"winner_lr", r.learning_rates[r.winner]}};
           line["depth_inliers"] = r.depth_inliers;
+          line["depth_noise"] = r.depth_noise;
           line["confidence"] = r.confidence;
           line["loss_terms"] = {{"rgb", r.loss.rgb}, {"depth", r.loss.depth}, {"mask", r.loss.mask}};
           line["terms"] = used_terms(r.loss_used);

@@ -233,6 +233,7 @@ nlohmann::ordered_json pose_json(const RefineResult& r) {
               {"time_ms", r.time_ms},
               {"mask_iou", r.mask_iou},
               {"depth_inliers", r.depth_inliers},
+              {"depth_noise_mm_at_1m", r.depth_noise < 0 ? -1.0 : 1e3 * r.depth_noise},
               {"converged", r.converged},
               {"plausible", r.plausible},
               {"judged", r.judged},

@@ -167,6 +167,7 @@ bool CalibrationNodelet::onCompute(ComputeCalibration::Request&, ComputeCalibrat
     m.mask_iou = c.mask_iou;
     m.depth_inliers = c.depth_inliers;
     m.depth_median_mm = c.depth_median_mm;
+    m.depth_noise_mm = c.depth_noise_mm;
     m.derived_mask = c.derived_mask;
     res.residuals.push_back(m);
   }

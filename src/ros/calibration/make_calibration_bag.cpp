@@ -3,6 +3,10 @@
 // camera pose and a guess 5 cm / 10 degrees off. The arm stands on a table with a box and a can beside it.
 //
 //   diffdope_make_calibration_bag --out DIR [--configurations N (4)] [--rate HZ (3)] [--seed S (1)] [--eye-in-hand]
+//                                 [--depth-noise MM (2)] [--noise-grain PX (0)] [--flying-pixels F (0)]
+//
+// The depth camera's noise as diffdope_calibrate --generate's: MM at 1 m growing with z^2, correlated over PX
+// pixels, and a share F of the silhouettes' border pixels reading a mixed depth.
 //
 // DIR/robot/robot.urdf (+ meshes), DIR/calibration.bag, DIR/truth.yaml (truth: [x, y, z, qx, qy, qz, qw], the
 // camera in base_link; --eye-in-hand: the camera on the hand's bracket, its pose in link5) and DIR/guess.yaml
@@ -45,6 +49,14 @@ std::string pose_list(const Pose& p) {
   return b;
 }
 
+double bounded(const std::string& flag, const std::string& text, double low, double high) {
+  const double v = parse_number_arg(flag, text);
+  if (!(v >= low && v <= high))
+    throw std::invalid_argument(flag + ": " + text + " is outside [" + std::to_string(low) + ", " +
+                                std::to_string(high) + "]");
+  return v;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -53,6 +65,7 @@ int main(int argc, char** argv) {
   double rate = 3;
   long long seed = 1;
   bool eye_in_hand = false;
+  RobotSceneOptions scene;
   try {
     for (int i = 1; i < argc; ++i) {
       const std::string k = argv[i];
@@ -62,7 +75,7 @@ int main(int argc, char** argv) {
       }
       if (k == "-h" || k == "--help" || i + 1 >= argc) {
         std::cerr << "usage: diffdope_make_calibration_bag --out DIR [--configurations N] [--rate HZ] [--seed S]"
-                     " [--eye-in-hand]\n";
+                     " [--eye-in-hand] [--depth-noise MM] [--noise-grain PX] [--flying-pixels F]\n";
         return k == "-h" || k == "--help" ? 0 : 2;
       }
       const std::string v = argv[++i];
@@ -70,6 +83,9 @@ int main(int argc, char** argv) {
       else if (k == "--configurations") configurations = int(parse_integer_arg(k, v, 1, 20));
       else if (k == "--rate") rate = double(parse_integer_arg(k, v, 1, 30));
       else if (k == "--seed") seed = parse_integer_arg(k, v, 0, 1LL << 40);
+      else if (k == "--depth-noise") scene.noise.depth_sigma_at_1m = 0.001 * bounded(k, v, 0, 50);
+      else if (k == "--noise-grain") scene.noise.depth_noise_grain_px = bounded(k, v, 0, 10);
+      else if (k == "--flying-pixels") scene.noise.flying_pixel_fraction = bounded(k, v, 0, 1);
       else throw std::invalid_argument("unknown option '" + k + "'");
     }
     if (out.empty()) throw std::invalid_argument("--out DIR is required");
@@ -141,8 +157,8 @@ int main(int argc, char** argv) {
       const Mesh posed = merge_meshes(model.posed_visuals(q, hand_links), "arm");
       const Pose camera_from_base =
           eye_in_hand ? truth * model.link_poses(q).at(kGeneratedHandLink).inverse() : truth;
-      const SyntheticScene s = synthesize_robot_scene(*renderer, cam, posed, camera_from_base, RobotSceneOptions(),
-                                                      uint32_t(seed * 1000 + f));
+      const SyntheticScene s =
+          synthesize_robot_scene(*renderer, cam, posed, camera_from_base, scene, uint32_t(seed * 1000 + f));
       std_msgs::Header h;
       h.stamp = t0 + ros::Duration(tau);
       h.frame_id = "camera_color_optical_frame";

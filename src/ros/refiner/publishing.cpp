@@ -19,6 +19,7 @@ diffdope_ros::RefinedPose refined_pose_msg(const diffdope::RefineResult& r, cons
   p.source = diffdope::to_string(seed.source);
   p.mask_iou = r.mask_iou;
   p.depth_inliers = r.depth_inliers;
+  p.depth_noise = r.depth_noise;
   p.loss = r.loss.total;
   p.initial_loss = r.initial_loss;
   p.converged = r.converged;
