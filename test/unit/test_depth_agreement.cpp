@@ -138,8 +138,18 @@ TEST(DepthAgreement, AnObjectFarFromANoisyCameraIsJudgedByItsNoise) {
   EXPECT_GT(wrong.mask_iou, o.min_mask_iou);
   EXPECT_LT(wrong.depth_inliers, 0.5);
   EXPECT_FALSE(wrong.plausible);
+  // Without a mask, against the pixels derived from depth: the same.
+  Observation unmasked = obs;
+  unmasked.mask = cv::Mat();
+  const RefineResult derived = Refiner(o).refine(cam, unmasked, box, truth);
+  EXPECT_GT(derived.mask_iou, 0.9);
+  EXPECT_GT(derived.depth_inliers, 0.95);
+  EXPECT_TRUE(derived.plausible);
   o.max_depth_noise = 0;  // a fixed band of inlier_threshold
   const RefineResult fixed = Refiner(o).refine(cam, obs, box, truth);
   EXPECT_LT(fixed.depth_inliers, o.min_depth_inliers);
   EXPECT_FALSE(fixed.plausible);
+  const RefineResult fixed_derived = Refiner(o).refine(cam, unmasked, box, truth);
+  EXPECT_LT(fixed_derived.depth_inliers, o.min_depth_inliers);
+  EXPECT_FALSE(fixed_derived.plausible);
 }
