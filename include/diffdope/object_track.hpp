@@ -78,6 +78,9 @@ class ObjectTrack {
   std::optional<Seed> take_stale_detection(double image_stamp);
   /// Whether a detection not yet used is usable for an image stamped `image_stamp`.
   bool has_fresh_detection(double image_stamp) const;
+  /// The stamp of the unused detection when it is ahead of `image_stamp` by more than max_detection_age: kept for
+  /// a later image, but none may ever come (a detector on wall time beside sim-time images); the caller reports it.
+  std::optional<double> detection_ahead(double image_stamp) const;
 
   /// The seed for a frame stamped `image_stamp`, or nothing. Marks a chosen detection as used.
   std::optional<Seed> seed_for(double image_stamp);

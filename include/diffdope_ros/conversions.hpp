@@ -32,6 +32,7 @@ void check_labels_image(const sensor_msgs::Image& image);
 /// Colour image -> CV_32FC3 RGB in [0, 1]. Encodings: rgb8, bgr8, rgba8, bgra8, mono8.
 cv::Mat rgb_from_image(const sensor_msgs::Image& image);
 /// Depth image (REP 118) -> CV_32FC1 metres, 0 = no reading. Encodings: 16UC1 / mono16 (millimetres), 32FC1 (m).
+/// Throws std::invalid_argument for an image without any valid reading.
 cv::Mat depth_from_image(const sensor_msgs::Image& image);
 /// Mask or label image -> a copy as CV_8UC1 or CV_16UC1. Encodings: mono8, 8UC1, mono16, 16UC1.
 cv::Mat labels_from_image(const sensor_msgs::Image& image);

@@ -24,6 +24,9 @@ struct DecodedHypothesis {
   double score = 0;
   diffdope::Pose pose;                 // metres, in the detection's header frame
   std::array<double, 36> covariance{};
+  /// Why this hypothesis cannot be used (a non-finite pose or score, a zero quaternion); empty when it can. One
+  /// bad hypothesis does not spoil the array: the others are used, and the caller names this one.
+  std::string problem;
 };
 
 struct DecodedDetection {
@@ -39,7 +42,8 @@ struct DecodedDetectionArray {
 };
 
 /// Decodes one serialized message. Throws std::invalid_argument naming the field and byte offset: truncated
-/// data, a count or length larger than the bytes left, a non-finite or zero-length quaternion, trailing bytes.
+/// data, a count or length larger than the bytes left, trailing bytes. A hypothesis with a non-finite pose or
+/// score, or a zero quaternion, is decoded with its `problem` set.
 DecodedDetectionArray decode_detection3d_array(const uint8_t* data, size_t size);
 
 }  // namespace diffdope_ros

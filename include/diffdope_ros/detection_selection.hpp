@@ -17,6 +17,9 @@ namespace diffdope_ros {
 struct DetectionSelection {
   std::map<std::string, std::vector<geometry_msgs::PoseStamped>> by_object;
   std::vector<int64_t> unknown_class_ids;  // detections whose class id no object has
+  /// Detections left out because no hypothesis of theirs could be used: "detection 3: results.pose is not
+  /// finite" (index in the array, from 0).
+  std::vector<std::string> unusable;
 };
 DetectionSelection select_detections(const DecodedDetectionArray& array, const std::map<std::string, int64_t>& class_ids);
 

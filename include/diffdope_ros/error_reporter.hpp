@@ -9,6 +9,10 @@ namespace diffdope_ros {
 
 class ErrorReporter {
  public:
+  /// At most this many categories are kept apart (per level); later ones are counted and throttled together
+  /// as "other", so a caller that puts values in a category cannot grow the diagnostics or bypass the throttle.
+  static constexpr size_t kMaxCategories = 32;
+
   explicit ErrorReporter(double throttle_period_s = 5.0) : period_(throttle_period_s) {}
   void set_throttle_period(double seconds) { period_ = seconds; }
 

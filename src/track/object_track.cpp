@@ -30,6 +30,11 @@ std::optional<Seed> ObjectTrack::take_stale_detection(double image_stamp) {
   return d;
 }
 
+std::optional<double> ObjectTrack::detection_ahead(double image_stamp) const {
+  if (!detection_ || detection_->stamp - image_stamp <= options_.max_detection_age) return std::nullopt;
+  return detection_->stamp;
+}
+
 bool ObjectTrack::tracking(double now) const {
   return track_ && now - track_->stamp <= options_.track_timeout;
 }

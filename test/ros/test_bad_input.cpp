@@ -3,6 +3,8 @@
 #include <diagnostic_msgs/DiagnosticArray.h>
 #include <geometry_msgs/PoseStamped.h>
 #include <gtest/gtest.h>
+
+#include <algorithm>
 #include <ros/ros.h>
 #include <rosbag/bag.h>
 #include <rosbag/view.h>
@@ -328,6 +330,33 @@ TEST(BadInput, MalformedMessagesThatNeverSynchronizeAreCountedAndReported) {
   EXPECT_GE(input_count(n.diagnostics_text, "camera_info", "unmatched"), 0) << n.diagnostics_text;
 }
 
+// Every depth message malformed for three sync timeouts: its own error explains why no set forms, and stays
+// the cause the log and the diagnostics give (not "no synchronized input").
+TEST(BadInput, AMalformedInputStaysTheReportedCause) {
+  Node& n = *node;
+  const auto sync_errors = [&] {
+    std::lock_guard<std::mutex> l(n.mutex);
+    return std::count_if(n.errors.begin(), n.errors.end(),
+                         [](const std::string& e) { return e.find("no synchronized input") != std::string::npos; });
+  };
+  auto depth = n.good_depth;
+  depth.encoding = "mono8";
+  const long before = sync_errors();
+  for (int i = 0; i < 15; ++i) {
+    n.publishSet(n.good_rgb, n.good_info, depth, n.good_mask);
+    ros::WallDuration(0.2).sleep();
+  }
+  n.waitForError("depth image: unsupported encoding 'mono8'");
+  EXPECT_EQ(sync_errors(), before);
+  const std::string text = n.waitForDiagnostics("last error: depth message dropped");
+  EXPECT_NE(text.find("last error: depth message dropped: depth image: unsupported encoding 'mono8'"),
+            std::string::npos) << text;
+  // A depth image without any valid reading is dropped and said so, not refined as if the object had no depth.
+  auto blank = n.good_depth;
+  std::fill(blank.data.begin(), blank.data.end(), 0);
+  n.publishSetUntilError(n.good_rgb, n.good_info, blank, n.good_mask, "depth image has no valid reading");
+}
+
 TEST(BadInput, StillRefinesAGoodFrameAfterwards) {
   Node& n = *node;
   const diffdope::Pose init =
@@ -417,9 +446,12 @@ TEST(BadInput, DopesDetectionArrayIsReadAndBadOnesAreReported) {
   const auto array = [&](const ros::Time& stamp) {
     diffdope_ros::test::Writer w;
     w.header(0, stamp.sec, stamp.nsec, "camera_color_optical_frame");
-    w.put<uint32_t>(3);
+    w.put<uint32_t>(4);
     const auto q = init.quaternion_xyzw();
-    for (const auto& [id, score, dx] : {std::tuple<int64_t, double, double>{1, 0.8, 0.0}, {1, 0.3, 0.2}, {9, 0.9, 0.0}}) {
+    // The last one, the box's best score, has a NaN position: it alone is left out (and named).
+    const double nan = std::numeric_limits<double>::quiet_NaN();
+    for (const auto& [id, score, dx] : {std::tuple<int64_t, double, double>{1, 0.8, 0.0}, {1, 0.3, 0.2}, {9, 0.9, 0.0},
+                                        {1, 0.95, nan}}) {
       w.header(0, stamp.sec, stamp.nsec, "camera_color_optical_frame");
       w.put<uint32_t>(1);
       w.hypothesis_at(id, score, init.t.x() + dx, init.t.y(), init.t.z(), q[0], q[1], q[2], q[3]);
@@ -437,6 +469,7 @@ TEST(BadInput, DopesDetectionArrayIsReadAndBadOnesAreReported) {
     before = n.refined_box_count;
   }
   n.refineBoxFrom(before, [&] { publish(array(ros::Time::now())); }, "no refined pose with detections from the array");
+  n.waitForError("1 of 4 detection(s) ignored (first: detection 3: results.pose is not finite)");
   // The weaker second box is one more than the box's max_instances (1): counted, not used.
   const std::string key = "detections beyond max_instances (ignored): ";
   std::string text;
@@ -451,9 +484,10 @@ TEST(BadInput, DopesDetectionArrayIsReadAndBadOnesAreReported) {
   const size_t line = text.find("input detections (Detection3DArray): ");
   ASSERT_NE(line, std::string::npos) << text;
   const std::string counts = text.substr(line, text.find('\n', line) - line);
-  EXPECT_EQ(counts.find("used 0,"), std::string::npos) << counts;
-  EXPECT_NE(counts.find("malformed 2,"), std::string::npos) << counts;  // the other layout and the cut array
-  EXPECT_EQ(counts.find("unknown class ids 0,"), std::string::npos) << counts;
+  EXPECT_EQ(counts.find("of a known class 0,"), std::string::npos) << counts;
+  EXPECT_NE(counts.find("(malformed 2)"), std::string::npos) << counts;  // the other layout and the cut array
+  EXPECT_EQ(counts.find("of an unknown class id 0,"), std::string::npos) << counts;
+  EXPECT_EQ(counts.find("unusable 0"), std::string::npos) << counts;
 }
 
 

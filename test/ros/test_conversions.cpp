@@ -375,6 +375,17 @@ TEST(DepthFromImage, MetresPassThroughAndInvalidBecomesZero) {
   EXPECT_TRUE(cv::checkRange(d));  // no NaN/inf left anywhere
 }
 
+TEST(DepthFromImage, AnImageWithoutAnyValidReadingThrows) {
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  const float inf = std::numeric_limits<float>::infinity();
+  for (const float v : {0.0f, nan, inf, -1.0f}) {
+    const std::string msg = thrown_message([&] { depth_from_image(typed_image("32FC1", 2, 2, std::vector<float>(4, v))); });
+    EXPECT_TRUE(contains(msg, "no valid reading")) << v << ": " << msg;
+  }
+  EXPECT_THROW(depth_from_image(typed_image<uint16_t>("16UC1", 2, 2, {0, 0, 0, 0})), std::invalid_argument);
+  EXPECT_NO_THROW(depth_from_image(typed_image<uint16_t>("16UC1", 2, 2, {0, 0, 0, 700})));
+}
+
 TEST(DepthFromImage, UnsupportedEncodingThrowsNamingIt) {
   for (const std::string enc : {"8UC1", "rgb8"}) {
     const size_t bpp = enc == "rgb8" ? 3 : 1;

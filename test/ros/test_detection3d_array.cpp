@@ -89,12 +89,24 @@ TEST(Detection3DArray, HostileCountsAndValuesAreRefusedByName) {
   const size_t x_at = 42 + 4 + 42 + 4 + 16;
   const double nan = std::numeric_limits<double>::quiet_NaN();
   std::memcpy(b.data() + x_at, &nan, sizeof nan);
-  try {
-    decode_detection3d_array(b.data(), b.size());
-    ADD_FAILURE();
-  } catch (const std::invalid_argument& e) {
-    EXPECT_NE(std::string(e.what()).find("results.pose is not finite"), std::string::npos) << e.what();
-  }
+  // A NaN pose spoils its detection only: it is decoded with its problem, and the others are used.
+  const auto m = decode_detection3d_array(b.data(), b.size());
+  ASSERT_EQ(m.detections.size(), 2u);
+  EXPECT_EQ(m.detections[0].results[0].problem, "results.pose is not finite");
+  EXPECT_TRUE(m.detections[1].results[0].problem.empty());
+  const auto chosen = diffdope_ros::select_detections(m, {{"box", 1}, {"mug", 3}});
+  EXPECT_EQ(chosen.by_object.count("box"), 0u);
+  ASSERT_EQ(chosen.by_object.at("mug").size(), 1u);
+  EXPECT_EQ(chosen.unusable, std::vector<std::string>{"detection 0: results.pose is not finite"});
+  // A zero quaternion and a NaN score, likewise.
+  std::vector<uint8_t> z = two_detections();
+  for (size_t k = 3; k < 7; ++k) std::memset(z.data() + x_at + 8 * k, 0, 8);
+  EXPECT_EQ(decode_detection3d_array(z.data(), z.size()).detections[0].results[0].problem,
+            "results.pose has a zero quaternion");
+  std::vector<uint8_t> s = two_detections();
+  std::memcpy(s.data() + x_at - 8, &nan, sizeof nan);
+  EXPECT_EQ(decode_detection3d_array(s.data(), s.size()).detections[0].results[0].problem,
+            "results.score is not finite");
 }
 
 TEST(Detection3DArray, EachObjectGetsItsDetectionsByClassIdBestFirst) {

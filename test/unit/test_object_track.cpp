@@ -239,6 +239,21 @@ TEST(ObjectTrack, NewestArrivalWinsAndStaleDetectionsAreHandedBack) {
   EXPECT_FALSE(t.has_fresh_detection(10.6));
 }
 
+TEST(ObjectTrack, ADetectionFarAheadOfTheImageIsKeptAndSaidSo) {
+  // A detector on wall time beside sim-time images: its stamp is 100 s after the image's. It is kept (a later
+  // image may use it) and handed to the caller to report, each frame it waits; within max_detection_age it is
+  // simply fresh.
+  ObjectTrack t(options());
+  t.add_detection(at(0.1), 110.0);
+  EXPECT_FALSE(t.take_stale_detection(10.0).has_value());
+  ASSERT_TRUE(t.detection_ahead(10.0).has_value());
+  EXPECT_DOUBLE_EQ(*t.detection_ahead(10.0), 110.0);
+  EXPECT_FALSE(t.peek(10.0).has_value());
+  EXPECT_FALSE(t.detection_ahead(109.5).has_value());  // 0.5 s ahead: fresh
+  expect_seed(t.seed_for(109.5), SeedSource::kDetector, 0.1, 110.0);
+  EXPECT_FALSE(t.detection_ahead(10.0).has_value());  // used: nothing waits
+}
+
 TEST(ObjectTrack, TrackingFlagTimesOutAndSameFrameKeepsVelocity) {
   ObjectTrack t(options(), Eigen::Vector3d::Zero());
   t.report(at(0.1), true, 10.0);

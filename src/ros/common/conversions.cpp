@@ -108,7 +108,12 @@ cv::Mat depth_from_image(const sensor_msgs::Image& image) {
   check_depth_image(image);
   // REP 118: uint16 depth is millimetres, float depth metres.
   const double metres_per_unit = image.encoding == enc::TYPE_32FC1 ? 1.0 : 0.001;
-  return diffdope::to_depth_metres(share(image, "depth"), metres_per_unit, "depth image");
+  cv::Mat depth = diffdope::to_depth_metres(share(image, "depth"), metres_per_unit, "depth image");
+  // A frame whose depth says nothing (a camera's laser off, a driver's blank first frame) is not refined as if
+  // the object had no depth there: it is dropped, and said so.
+  if (cv::countNonZero(depth > 0.f) == 0)
+    throw std::invalid_argument("depth image has no valid reading (every pixel zero, NaN, infinite or negative)");
+  return depth;
 }
 
 cv::Mat labels_from_image(const sensor_msgs::Image& image) {

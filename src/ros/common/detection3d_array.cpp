@@ -61,13 +61,19 @@ void header(Reader& r, std::string* frame, uint32_t* sec, uint32_t* nsec) {
   *frame = r.string("header.frame_id");
 }
 
-diffdope::Pose pose(Reader& r, const char* what) {
+/// The pose, or (`problem` set) identity when its values cannot be one.
+diffdope::Pose pose(Reader& r, const char* what, std::string* problem) {
   double v[7];
   for (double& x : v) x = r.read<double>(what);
   for (double x : v)
-    if (!std::isfinite(x)) throw std::invalid_argument(std::string("Detection3DArray: ") + what + " is not finite");
-  if (std::sqrt(v[3] * v[3] + v[4] * v[4] + v[5] * v[5] + v[6] * v[6]) < 1e-6)
-    throw std::invalid_argument(std::string("Detection3DArray: ") + what + " has a zero quaternion");
+    if (!std::isfinite(x)) {
+      *problem = std::string(what) + " is not finite";
+      return diffdope::Pose();
+    }
+  if (std::sqrt(v[3] * v[3] + v[4] * v[4] + v[5] * v[5] + v[6] * v[6]) < 1e-6) {
+    *problem = std::string(what) + " has a zero quaternion";
+    return diffdope::Pose();
+  }
   return diffdope::Pose::from_quaternion(v[3], v[4], v[5], v[6], Eigen::Vector3d(v[0], v[1], v[2]));
 }
 
@@ -103,7 +109,8 @@ DecodedDetectionArray decode_detection3d_array(const uint8_t* data, size_t size)
     for (DecodedHypothesis& h : d.results) {
       h.class_id = r.read<int64_t>("results.id");
       h.score = r.read<double>("results.score");
-      h.pose = pose(r, "results.pose");
+      h.pose = pose(r, "results.pose", &h.problem);
+      if (h.problem.empty() && !std::isfinite(h.score)) h.problem = "results.score is not finite";
       for (double& c : h.covariance) c = r.read<double>("results.pose.covariance");
     }
     r.skip(56 + 24, "bbox");  // center pose and size: not used

@@ -12,12 +12,23 @@ bool ErrorReporter::should_log(const std::string& key, double now) {
   return true;
 }
 
-void ErrorReporter::error(const std::string& category, const std::string& message) {
+namespace {
+
+const std::string& bounded(const std::map<std::string, long>& counts, const std::string& category) {
+  static const std::string other = "other";
+  return counts.count(category) || counts.size() < ErrorReporter::kMaxCategories - 1 ? category : other;
+}
+
+}  // namespace
+
+void ErrorReporter::error(const std::string& given_category, const std::string& message) {
   const double now = ros::WallTime::now().toSec();
   bool log;
   long count;
+  std::string category;
   {
     std::lock_guard<std::mutex> lock(mutex_);
+    category = bounded(summary_.error_counts, given_category);
     count = ++summary_.error_counts[category];
     summary_.last_error = message;
     summary_.last_error_time = now;
@@ -29,11 +40,12 @@ void ErrorReporter::error(const std::string& category, const std::string& messag
   }
 }
 
-void ErrorReporter::warn(const std::string& category, const std::string& message) {
+void ErrorReporter::warn(const std::string& given_category, const std::string& message) {
   const double now = ros::WallTime::now().toSec();
   bool log;
   {
     std::lock_guard<std::mutex> lock(mutex_);
+    const std::string& category = bounded(summary_.warn_counts, given_category);
     ++summary_.warn_counts[category];
     log = should_log("W" + category, now);
   }

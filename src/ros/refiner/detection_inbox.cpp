@@ -133,6 +133,11 @@ void DetectionInbox::onDetectionArray(const topic_tools::ShapeShifter::ConstPtr&
     return;
   }
   const DetectionSelection chosen = select_detections(decoded, settings_.class_ids);
+  count(&ArrayCounts::malformed_detections, long(chosen.unusable.size()));
+  if (!chosen.unusable.empty())
+    errors_.error("detections", where + std::to_string(chosen.unusable.size()) + " of " +
+                                    std::to_string(decoded.detections.size()) + " detection(s) ignored (first: " +
+                                    chosen.unusable.front() + "); the others are used");
   count(&ArrayCounts::unknown_class, long(chosen.unknown_class_ids.size()));
   if (!chosen.unknown_class_ids.empty())
     errors_.warn("class_ids", where + std::to_string(chosen.unknown_class_ids.size()) +
@@ -141,7 +146,7 @@ void DetectionInbox::onDetectionArray(const topic_tools::ShapeShifter::ConstPtr&
   for (const auto& [name, poses] : chosen.by_object) {
     for (size_t i = 0; i < objects_.size(); ++i) {
       if (objects_[i].name != name) continue;
-      count(&ArrayCounts::used, long(poses.size()));
+      count(&ArrayCounts::known_class, long(poses.size()));
       store(poses, i, where + "class id " + std::to_string(settings_.class_ids.at(name)) + " ('" + name + "')");
     }
   }
@@ -151,9 +156,11 @@ void DetectionInbox::addDiagnostics(diagnostic_updater::DiagnosticStatusWrapper&
   if (settings_.detections_topic.empty()) return;
   std::lock_guard<std::mutex> lock(mutex_);
   const ArrayCounts& c = array_counts_;
+  // Of the detections of a known class, those beyond an object's max_instances are counted by the refiner.
   stat.add("input detections (Detection3DArray)",
-           "received " + std::to_string(c.received) + ", used " + std::to_string(c.used) + ", malformed " +
-               std::to_string(c.malformed) + ", unknown class ids " + std::to_string(c.unknown_class));
+           "received " + std::to_string(c.received) + " arrays (malformed " + std::to_string(c.malformed) +
+               "); detections of a known class " + std::to_string(c.known_class) + ", of an unknown class id " +
+               std::to_string(c.unknown_class) + ", unusable " + std::to_string(c.malformed_detections));
 }
 
 }  // namespace diffdope_ros

@@ -55,7 +55,8 @@ class DetectionInbox {
   std::mutex mutex_;
   std::vector<std::optional<Poses>> pending_;  // per object (mutex_)
   struct ArrayCounts {
-    long received = 0, used = 0, malformed = 0, unknown_class = 0;
+    long received = 0, malformed = 0;  // arrays
+    long known_class = 0, unknown_class = 0, malformed_detections = 0;  // detections in the arrays
   } array_counts_;  // (mutex_)
 
   std::vector<ros::Subscriber> pose_subs_;

@@ -11,11 +11,16 @@ DetectionSelection select_detections(const DecodedDetectionArray& array,
                                      const std::map<std::string, int64_t>& class_ids) {
   DetectionSelection out;
   std::map<std::string, std::vector<std::pair<double, geometry_msgs::PoseStamped>>> scored;
-  for (const DecodedDetection& d : array.detections) {
+  for (size_t k = 0; k < array.detections.size(); ++k) {
+    const DecodedDetection& d = array.detections[k];
     if (d.results.empty()) continue;
-    const DecodedHypothesis* h = &d.results.front();
+    const DecodedHypothesis* h = nullptr;  // the best usable one
     for (const DecodedHypothesis& r : d.results)
-      if (r.score > h->score) h = &r;
+      if (r.problem.empty() && (!h || r.score > h->score)) h = &r;
+    if (!h) {
+      out.unusable.push_back("detection " + std::to_string(k) + ": " + d.results.front().problem);
+      continue;
+    }
     std::string name;
     for (const auto& [object, id] : class_ids)
       if (id == h->class_id) name = object;

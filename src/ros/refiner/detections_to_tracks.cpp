@@ -89,14 +89,24 @@ void RefinerNodelet::absorbDetections(const Frame& frame) {
   // A detection too old for this frame can never be used (frames only get newer): say so, with both stamps
   // (a detector stamping with another clock, e.g. wall time under sim time, shows up here).
   const double image_stamp = frame.header.stamp.toSec();
+  // One far ahead of it waits for a later image, and is said so each frame (throttled): none may ever come.
   for (auto& slot : slots_)
-    for (int k = 0; slot->tracks && k < slot->tracks->size(); ++k)
-      if (auto stale = slot->tracks->track(k).take_stale_detection(image_stamp))
+    for (int k = 0; slot->tracks && k < slot->tracks->size(); ++k) {
+      diffdope::ObjectTrack& track = slot->tracks->track(k);
+      const std::string& name = slot->instances[size_t(k)].name;
+      if (auto stale = track.take_stale_detection(image_stamp))
         errors_.error("pose/" + slot->config.name,
-                      "initial pose of '" + slot->instances[size_t(k)].name + "' ignored: stamped " +
-                          format_fixed(stale->stamp) + ", more than ~max_detection_age (" +
-                          format_fixed(track_options_.max_detection_age, 1) + " s) before the image at " +
-                          format_fixed(image_stamp));
+                      "initial pose of '" + name + "' ignored: stamped " + format_fixed(stale->stamp) +
+                          ", more than ~max_detection_age (" + format_fixed(track_options_.max_detection_age, 1) +
+                          " s) before the image at " + format_fixed(image_stamp));
+      else if (auto ahead = track.detection_ahead(image_stamp))
+        errors_.error("pose/" + slot->config.name,
+                      "initial pose of '" + name + "' not used yet: stamped " + format_fixed(*ahead) + ", " +
+                          format_fixed(*ahead - image_stamp, 1) + " s after the image at " +
+                          format_fixed(image_stamp) + " (more than ~max_detection_age, " +
+                          format_fixed(track_options_.max_detection_age, 1) +
+                          " s); kept for a later image (is the detector on another clock?)");
+    }
 }
 
 }  // namespace diffdope_ros

@@ -10,12 +10,23 @@ namespace diffdope_ros {
 namespace {
 
 const char* kInputNames[4] = {"rgb", "camera_info", "depth", "mask"};
+/// An rgb message within this many seconds means the inputs are flowing (the watchdog's concern); a longer gap
+/// is a pause.
+constexpr double kRecentArrival = 1.5;
 
 }  // namespace
 
 void report_input_error(ErrorReporter& errors, const std::exception& e) {
-  const std::string what = e.what();  // "<input> image: problem": throttle per input, not one for all
-  errors.error("input/" + what.substr(0, what.find(':')), "input frame dropped: " + what);
+  // Throttled per input, not one for all; the category is the input the message names first ("depth image is
+  // 400x300 ..."), never the message itself: its sizes and values would make each message a category of its own.
+  const std::string what = e.what();
+  std::string input = "other";
+  for (const char* name : kInputNames)
+    if (what.rfind(name, 0) == 0) {
+      input = name;
+      break;
+    }
+  errors.error("input/" + input, "input frame dropped: " + what);
 }
 
 bool InputSync::used(int index) const {
@@ -91,8 +102,10 @@ void InputSync::shutdown() {
 void InputSync::noteArrival(int index, const std_msgs::Header& header) {
   std::lock_guard<std::mutex> lock(mutex_);
   ++counts_[index].received;
-  last_arrival_[index] = ros::WallTime::now();
-  if (index == kRgb && first_arrival_.isZero()) first_arrival_ = last_arrival_[index];
+  const ros::WallTime now = ros::WallTime::now();
+  if (index == kRgb && (last_arrival_[kRgb].isZero() || (now - last_arrival_[kRgb]).toSec() > kRecentArrival))
+    arrivals_resumed_ = now;
+  last_arrival_[index] = now;
   last_stamp_[index] = header.stamp;
 }
 
@@ -100,6 +113,7 @@ void InputSync::rejectInput(int index, const std::string& reason) {
   {
     std::lock_guard<std::mutex> lock(mutex_);
     ++counts_[index].malformed;
+    last_rejected_ = ros::WallTime::now();
   }
   // Throttled per input; reason reads "<input> image: problem".
   errors_.error(std::string("input/") + kInputNames[index], std::string(kInputNames[index]) + " message dropped: " + reason);
@@ -177,10 +191,13 @@ void InputSync::checkSynchronization() {
   // Inputs that arrive but never form a synchronized set (a silent topic, stamps too far apart) are an error.
   const ros::WallTime now = ros::WallTime::now();
   std::lock_guard<std::mutex> lock(mutex_);
-  const bool rgb_recent = !last_arrival_[kRgb].isZero() && (now - last_arrival_[kRgb]).toSec() < 1.5;
-  // Before any synchronized set, count from the first rgb message (a silent depth or mask topic).
-  const double since_sync = last_sync_.isZero() ? (now - first_arrival_).toSec() : (now - last_sync_).toSec();
+  const bool rgb_recent = !last_arrival_[kRgb].isZero() && (now - last_arrival_[kRgb]).toSec() < kRecentArrival;
+  // Since the inputs last paired, or since they resumed after a pause (before any set: a silent depth or mask
+  // topic from the start).
+  const double since_sync = (now - std::max(last_sync_, arrivals_resumed_)).toSec();
   if (!rgb_recent || !(since_sync > settings_.sync_timeout)) return;
+  // A message dropped as malformed within that time already says why no set forms; it stays the last error.
+  if (!last_rejected_.isZero() && (now - last_rejected_).toSec() < settings_.sync_timeout) return;
   std::ostringstream msg;
   msg << "no synchronized input for " << format_fixed(since_sync, 1) << " s (~sync_timeout " << settings_.sync_timeout
       << " s, ~max_interval " << settings_.max_interval << " s); last stamps:";

@@ -81,7 +81,10 @@ class InputSync {
   } counts_[kInputs];
   ros::WallTime last_arrival_[kInputs];  // wall time of the last message of each input
   ros::Time last_stamp_[kInputs];
-  ros::WallTime first_arrival_;  // first rgb message (the watchdog before any synchronized set)
+  /// The first rgb message after a silence (or ever): the watchdog counts from it or the last synchronized set,
+  /// whichever is later, so a pause of the inputs is not counted as a failure to pair them.
+  ros::WallTime arrivals_resumed_;
+  ros::WallTime last_rejected_;  // the last message dropped as malformed: its own error explains the gap
   ros::WallTime last_sync_;
 };
 
