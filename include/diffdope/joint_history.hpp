@@ -5,6 +5,7 @@
 // its gripper), each naming only its own joints. Times in seconds, positions in radians or metres.
 #include <deque>
 #include <map>
+#include <set>
 #include <optional>
 #include <string>
 
@@ -39,6 +40,12 @@ class JointHistory {
   /// covered, or which joint moved how fast).
   std::optional<std::map<std::string, double>> still_at(double stamp, std::string* why) const;
   void clear() { joints_.clear(); }
+  /// From now on only these joints are kept (the robot's; empty: all): a joint another robot or a tool
+  /// publishes is no joint of this one, and neither stops nor stalls a sample.
+  void keep_only(const std::set<std::string>& joints);
+  /// A message the caller could not use (NaN positions, names and positions of different lengths): when no
+  /// reading came after it, still_at()'s refusals name it as the cause.
+  void note_rejected(double stamp, const std::string& why);
   /// Readings kept, over all joints.
   size_t size() const;
 
@@ -50,6 +57,8 @@ class JointHistory {
   StillnessOptions options_;
   std::map<std::string, std::deque<Sample>> joints_;  // per joint, by stamp
   double newest_ = -1e300;
+  std::set<std::string> kept_;  // empty: every joint
+  std::string rejected_;        // the last message rejected after the newest reading; empty: none
 };
 
 }  // namespace diffdope

@@ -25,10 +25,22 @@ size_t JointHistory::size() const {
   return n;
 }
 
+void JointHistory::keep_only(const std::set<std::string>& joints) {
+  kept_ = joints;
+  if (kept_.empty()) return;
+  for (auto it = joints_.begin(); it != joints_.end();) it = kept_.count(it->first) ? std::next(it) : joints_.erase(it);
+}
+
+void JointHistory::note_rejected(double stamp, const std::string& why) {
+  if (stamp >= newest_ || !std::isfinite(stamp)) rejected_ = why;
+}
+
 void JointHistory::add(const JointReading& r) {
   if (r.stamp < newest_ - options_.keep) joints_.clear(), newest_ = -1e300;  // time went back
+  if (r.stamp >= newest_) rejected_.clear();
   newest_ = std::max(newest_, r.stamp);
   for (const auto& [name, position] : r.position) {
+    if (!kept_.empty() && !kept_.count(name)) continue;
     const auto v = r.velocity.find(name);
     const Sample s{r.stamp, position, v == r.velocity.end() ? 0.0 : v->second, v != r.velocity.end()};
     std::deque<Sample>& q = joints_[name];
@@ -42,7 +54,7 @@ bool JointHistory::covers(double stamp) const { return newest_ >= stamp + option
 
 std::optional<std::map<std::string, double>> JointHistory::still_at(double stamp, std::string* why) const {
   const auto say = [&](const std::string& s) {
-    if (why) *why = s;
+    if (why) *why = rejected_.empty() ? s : s + " (the latest joint_states message was ignored: " + rejected_ + ")";
     return std::nullopt;
   };
   if (joints_.empty()) return say("no joint states received");

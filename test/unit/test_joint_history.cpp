@@ -92,3 +92,34 @@ TEST(JointHistory, SeveralPublishersEachWithTheirJoints) {
   EXPECT_EQ(q->size(), 3u);
   EXPECT_DOUBLE_EQ(q->at("g"), 0.02);
 }
+
+TEST(JointHistory, AJointOfAnotherRobotNeitherStopsNorStallsASample) {
+  // A state of a joint the robot does not have, once: later readings of the robot's own joints stand alone.
+  JointHistory h;
+  h.keep_only({"a", "b"});
+  JointReading stray;
+  stray.stamp = 9.0;
+  stray.position["gripper"] = 0.1;
+  h.add(stray);
+  for (int k = 0; k <= 100; ++k) h.add(reading(10.0 + 0.01 * k, 1.0));
+  std::string why;
+  const auto q = h.still_at(10.5, &why);
+  ASSERT_TRUE(q.has_value()) << why;
+  EXPECT_EQ(q->count("gripper"), 0u);
+  EXPECT_EQ(q->size(), 2u);
+}
+
+TEST(JointHistory, ARejectedMessageIsNamedAsTheCause) {
+  // Only NaN states so far: the refusal says so, not "no joint states received".
+  JointHistory h;
+  h.note_rejected(10.0, "joint 'a' is not finite");
+  std::string why;
+  EXPECT_FALSE(h.still_at(10.0, &why));
+  EXPECT_NE(why.find("the latest joint_states message was ignored: joint 'a' is not finite"), std::string::npos)
+      << why;
+  // Good readings after it: the cause is gone.
+  for (int k = 0; k <= 100; ++k) h.add(reading(10.0 + 0.01 * k, 1.0));
+  EXPECT_TRUE(h.still_at(10.5, &why)) << why;
+  EXPECT_FALSE(h.still_at(10.95, &why));
+  EXPECT_EQ(why.find("ignored"), std::string::npos) << why;
+}

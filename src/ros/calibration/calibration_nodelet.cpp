@@ -122,6 +122,11 @@ void CalibrationNodelet::loadRobot() {
     robot_ = std::make_unique<diffdope::RobotModel>(
         diffdope::RobotModel::parse_urdf(urdf, base_dir, "parameter " + key, resolver));
     if (base_frame_.empty()) base_frame_ = robot_->root_link();
+    {
+      const std::vector<std::string> names = robot_->joint_names();
+      std::lock_guard<std::mutex> l(input_mutex_);
+      joints_->keep_only(std::set<std::string>(names.begin(), names.end()));
+    }
     try {
       mount_.check(*robot_);
     } catch (const std::invalid_argument& e) {
@@ -161,17 +166,18 @@ void CalibrationNodelet::onInfo(const sensor_msgs::CameraInfoConstPtr& m) {
 void CalibrationNodelet::onJoints(const sensor_msgs::JointStateConstPtr& m) {
   diffdope::JointReading r;
   r.stamp = m->header.stamp.toSec();
-  if (m->position.size() != m->name.size() || (!m->velocity.empty() && m->velocity.size() != m->name.size())) {
-    errors_.error("joint_states", "joint_states: " + std::to_string(m->name.size()) + " names but " +
-                                      std::to_string(m->position.size()) + " positions / " +
-                                      std::to_string(m->velocity.size()) + " velocities: ignored");
-    return;
-  }
+  // A message that cannot be used is logged, and the history keeps its reason for ~take_sample's reply.
+  const auto reject = [&](const std::string& why) {
+    errors_.error("joint_states", "joint_states: " + why + ": message ignored");
+    std::lock_guard<std::mutex> l(input_mutex_);
+    joints_->note_rejected(r.stamp, why);
+  };
+  if (m->position.size() != m->name.size() || (!m->velocity.empty() && m->velocity.size() != m->name.size()))
+    return reject(std::to_string(m->name.size()) + " names but " + std::to_string(m->position.size()) +
+                  " positions / " + std::to_string(m->velocity.size()) + " velocities");
   for (size_t i = 0; i < m->name.size(); ++i) {
-    if (!std::isfinite(m->position[i]) || (!m->velocity.empty() && !std::isfinite(m->velocity[i]))) {
-      errors_.error("joint_states", "joint_states: joint '" + m->name[i] + "' is not finite: message ignored");
-      return;
-    }
+    if (!std::isfinite(m->position[i]) || (!m->velocity.empty() && !std::isfinite(m->velocity[i])))
+      return reject("joint '" + m->name[i] + "' is not finite");
     r.position[m->name[i]] = m->position[i];
     if (!m->velocity.empty()) r.velocity[m->name[i]] = m->velocity[i];
   }

@@ -135,7 +135,7 @@ void DetectionInbox::onDetectionArray(const topic_tools::ShapeShifter::ConstPtr&
   const DetectionSelection chosen = select_detections(decoded, settings_.class_ids);
   count(&ArrayCounts::malformed_detections, long(chosen.unusable.size()));
   if (!chosen.unusable.empty())
-    errors_.error("detections", where + std::to_string(chosen.unusable.size()) + " of " +
+    errors_.error("detections/unusable", where + std::to_string(chosen.unusable.size()) + " of " +
                                     std::to_string(decoded.detections.size()) + " detection(s) ignored (first: " +
                                     chosen.unusable.front() + "); the others are used");
   count(&ArrayCounts::unknown_class, long(chosen.unknown_class_ids.size()));

@@ -60,8 +60,12 @@ std::vector<diffdope_ros::RefinedPose> RefinerNodelet::refineAndPublish(const Fr
   if (targets.empty()) return {};
   // Per-call options (tracking budget, service overrides) run on the node's refiner (its meshes stay cached).
   const ros::WallTime refine_start = ros::WallTime::now();
-  const std::vector<diffdope::RefineResult> results =
+  std::vector<diffdope::RefineResult> results =
       refiner_->refine_all(frame.camera, frame.observation, targets, options);
+  // With no iteration run (iterations 0) each result is its start, unrefined: the node never calls that
+  // plausible, whatever the start's scores, so it is neither tracked nor put on TF as a refined pose.
+  for (diffdope::RefineResult& r : results)
+    if (r.iterations == 0) r.plausible = false, r.confidence = 0;
   // The cost per evaluation made (RefineResult::evaluations); estimates use planned_evaluations(), an upper
   // bound, so they err long.
   double evaluations = 0;
