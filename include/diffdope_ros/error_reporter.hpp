@@ -16,8 +16,9 @@ class ErrorReporter {
   explicit ErrorReporter(double throttle_period_s = 5.0) : period_(throttle_period_s) {}
   void set_throttle_period(double seconds) { period_ = seconds; }
 
-  /// Logs `message` with ROS_ERROR unless this category was logged less than the throttle period ago.
-  void error(const std::string& category, const std::string& message);
+  /// Logs `message` with ROS_ERROR unless this category was logged less than the throttle period ago, or always
+  /// when `throttled` is false (the answer to one deliberate request, such as a refused reconfigure).
+  void error(const std::string& category, const std::string& message, bool throttled = true);
   /// The same at WARN level; warnings are counted but do not become last_error.
   void warn(const std::string& category, const std::string& message);
 

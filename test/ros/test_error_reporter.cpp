@@ -61,3 +61,12 @@ TEST(ErrorReporter, AnInputErrorIsCategorisedByItsInputNotItsText) {
   EXPECT_EQ(s.error_counts.at("input/camera_info"), 1);
   EXPECT_EQ(s.error_counts.at("input/other"), 1);
 }
+
+TEST(ErrorReporter, AnUnthrottledErrorIsCountedAndKeptAsEver) {
+  diffdope_ros::ErrorReporter r(60.0);
+  r.error("reconfigure", "reconfigure refused: iterations", false);
+  r.error("reconfigure", "reconfigure refused: batch_size", false);
+  const auto s = r.summary();
+  EXPECT_EQ(s.error_counts.at("reconfigure"), 2);
+  EXPECT_EQ(s.last_error, "reconfigure refused: batch_size");
+}

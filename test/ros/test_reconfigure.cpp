@@ -5,6 +5,7 @@
 #include <dynamic_reconfigure/Reconfigure.h>
 #include <gtest/gtest.h>
 #include <ros/ros.h>
+#include <rosgraph_msgs/Log.h>
 
 #include <mutex>
 
@@ -27,6 +28,16 @@ struct World {
     for (const auto& p : m->poses) r.iterations.push_back(p.iterations);
     std::lock_guard<std::mutex> l(mutex);
     arrays.push_back(r);
+  }
+  int refusals_logged = 0;
+  void onLog(const rosgraph_msgs::LogConstPtr& m) {
+    if (m->level < rosgraph_msgs::Log::ERROR || m->msg.find("reconfigure refused") == std::string::npos) return;
+    std::lock_guard<std::mutex> l(mutex);
+    ++refusals_logged;
+  }
+  int refusals() {
+    std::lock_guard<std::mutex> l(mutex);
+    return refusals_logged;
   }
   std::vector<Received> since(ros::WallTime t) {
     std::lock_guard<std::mutex> l(mutex);
@@ -161,6 +172,13 @@ TEST(Reconfigure, ChangesTakeEffectAtTheNextFramesAndBadSetsAreReverted) {
   dynamic_reconfigure::Config unknown;
   add(unknown.strs, "mode", std::string("sometimes"));
   EXPECT_EQ(strValue(set(unknown), "mode"), "tracking");
+
+  // Each refusal is logged, even two within the node's error throttle: each answers a request just made.
+  const int logged = world->refusals();
+  set(bad);
+  set(unknown);
+  for (int i = 0; i < 100 && world->refusals() < logged + 2; ++i) ros::WallDuration(0.05).sleep();
+  EXPECT_EQ(world->refusals(), logged + 2);
 }
 
 int main(int argc, char** argv) {
@@ -170,6 +188,7 @@ int main(int argc, char** argv) {
   World w;
   world = &w;
   ros::Subscriber sub = nh.subscribe("/diffdope_refiner/refined_poses", 50, &World::onRefined, &w);
+  ros::Subscriber log = nh.subscribe("/rosout", 100, &World::onLog, &w);
   ros::AsyncSpinner spinner(2);
   spinner.start();
   return RUN_ALL_TESTS();

@@ -21,7 +21,7 @@ const std::string& bounded(const std::map<std::string, long>& counts, const std:
 
 }  // namespace
 
-void ErrorReporter::error(const std::string& given_category, const std::string& message) {
+void ErrorReporter::error(const std::string& given_category, const std::string& message, bool throttled) {
   const double now = ros::WallTime::now().toSec();
   bool log;
   long count;
@@ -32,7 +32,7 @@ void ErrorReporter::error(const std::string& given_category, const std::string& 
     count = ++summary_.error_counts[category];
     summary_.last_error = message;
     summary_.last_error_time = now;
-    log = should_log("E" + category, now);
+    log = should_log("E" + category, now) || !throttled;
   }
   if (log) {
     if (count > 1) ROS_ERROR_STREAM_NAMED("diffdope", message << " [" << category << " error #" << count << "]");

@@ -25,7 +25,8 @@ void RefinerNodelet::onReconfigure(RefinerConfig& config, uint32_t level) {
   try {
     settings = from_config(config, runtime_settings_);
   } catch (const std::invalid_argument& e) {
-    errors_.error("reconfigure", std::string("reconfigure refused, the previous values stay: ") + e.what());
+    // Each refusal answers a request someone just made: logged every time, not throttled.
+    errors_.error("reconfigure", std::string("reconfigure refused, the previous values stay: ") + e.what(), false);
     config = applied_config_;  // the server publishes what is in force
     return;
   }
