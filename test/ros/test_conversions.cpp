@@ -86,6 +86,31 @@ TEST(CameraFromInfo, FallsBackToKWhenPIsAllZeroAndWarns) {
   EXPECT_DOUBLE_EQ(camera_from_info(info).fx, 500.0);
 }
 
+TEST(CameraFromInfo, ADistortionIsTakenAsRectifiedWithPAndRefusedWithoutIt) {
+  // D describes the raw camera, P the rectified images: with P the images are taken as rectified, and said so.
+  sensor_msgs::CameraInfo info = make_info();
+  info.distortion_model = "equidistant";
+  info.D = {0.1, -0.05, 0.001, 0.0};
+  std::string warning;
+  EXPECT_DOUBLE_EQ(camera_from_info(info, &warning).fx, 600.0);
+  EXPECT_TRUE(contains(warning, "distortion model 'equidistant' with D not zero")) << warning;
+  EXPECT_TRUE(contains(warning, "taken as rectified")) << warning;
+  // Without P there is no rectified camera: the images are raw, refused with the fix.
+  info.P.fill(0.0);
+  const std::string msg = thrown_message([&] { camera_from_info(info); });
+  EXPECT_TRUE(contains(msg, "not rectified")) << msg;
+  EXPECT_TRUE(contains(msg, "image_proc")) << msg;
+  // A zero D (plumb_bob, five zeros) is no distortion.
+  info = make_info();
+  info.distortion_model = "plumb_bob";
+  info.D = {0, 0, 0, 0, 0};
+  warning.clear();
+  camera_from_info(info, &warning);
+  EXPECT_TRUE(warning.empty()) << warning;
+  info.D[0] = std::numeric_limits<double>::quiet_NaN();
+  EXPECT_THROW(camera_from_info(info), std::invalid_argument);
+}
+
 TEST(CameraFromInfo, ZeroFocalLengthThrows) {
   sensor_msgs::CameraInfo info = make_info();
   info.P[0] = 0.0;

@@ -62,11 +62,26 @@ diffdope::Camera camera_from_info(const sensor_msgs::CameraInfo& info, std::stri
     if (!std::isfinite(v)) throw std::invalid_argument("camera_info: P has a non-finite value");
   for (double v : info.K)
     if (!std::isfinite(v)) throw std::invalid_argument("camera_info: K has a non-finite value");
+  bool distorted = false;
+  for (double v : info.D) {
+    if (!std::isfinite(v)) throw std::invalid_argument("camera_info: D has a non-finite value");
+    distorted = distorted || v != 0;
+  }
+  const std::string model = "distortion model '" + info.distortion_model + "' with D not zero";
   double fx = info.P[0], fy = info.P[5], cx = info.P[2], cy = info.P[6];
   if (fx == 0 && fy == 0 && cx == 0 && cy == 0) {
+    // No rectified projection: with a distortion the images can only be raw, and raw images give wrong poses.
+    if (distorted)
+      throw std::invalid_argument("camera_info: " + model + " and P all zero: the images are not rectified; "
+                                  "rectify them (image_proc) and subscribe to image_rect_color / image_rect");
     fx = info.K[0], fy = info.K[4], cx = info.K[2], cy = info.K[5];
     if (fx != 0 && warning)
       *warning = "camera_info: P is all zero, using K (the images are assumed rectified)";
+  } else if (distorted && warning) {
+    // ROS's convention: D describes the raw camera, P the rectified images (image_proc's image_rect): the usual
+    // case, but raw images with this camera_info would give wrong poses, so it is said once.
+    *warning = "camera_info: " + model + ": the images are taken as rectified (projected with P, as image_proc's "
+               "image_rect_color); raw images must be rectified first";
   }
   if (!(fx > 0) || !(fy > 0))
     throw std::invalid_argument("camera_info: focal length is zero or negative in P and K (fx=" +

@@ -150,7 +150,14 @@ void InputSync::onImages(const sensor_msgs::ImageConstPtr& rgb, const sensor_msg
   try {  // (each message passed its own checks before the synchronizer: CheckedInput)
     std::string warning;
     frame->camera = camera_from_info(*info, &warning);
-    if (!warning.empty()) errors_.warn("camera_info_k", warning);
+    if (!warning.empty()) {  // each once: it holds for every frame
+      bool first;
+      {
+        std::lock_guard<std::mutex> lock(mutex_);
+        first = noted_.insert(warning).second;
+      }
+      if (first) errors_.warn("camera_info", warning);
+    }
     // The rgb image's frame is the camera frame used; inputs in other frames are most likely not registered to
     // it (another camera of the rig, unaligned depth). Said, not refused: some drivers name frames loosely.
     const auto differs = [&](const std::string& other, const char* what) {
