@@ -13,9 +13,15 @@
 //         discrete: [{translation: [0, 0, 0], rotation: [1, 0, 0, 0]}]  # reports do not spin or flip
 //       mask_label: 3                       # label-image value of this object; -1 (default): any nonzero pixel
 //       pose_topic: /dope/pose_cracker      # detector PoseStamped topic (default /dope/pose_<name>)
+//       class_id: 1                         # DOPE's class id in its Detection3DArray (default: none)
 //       model_transform:                    # pose of the mesh in the object frame the detector reports
 //         translation: [0, 0, 0]            # metres
 //         rotation: [0, 0, 0, 1]            # quaternion x y z w
+//
+// Or DOPE's own config_pose.yaml, as it is: an object per entry of its `meshes` (file:// or package://), scaled by
+// its `mesh_scales`, with its `class_ids` and the pose topic /<topic_publishing>/pose_<name>. DOPE turns the pose
+// it publishes by its `model_transforms` itself, so the published pose is the mesh's and none applies here.
+#include <cstdint>
 #include <functional>
 #include <string>
 #include <vector>
@@ -37,6 +43,7 @@ struct ObjectConfig {
   /// Instances of this object tracked at once ([1, kMaxInstances]); more than one names them <name>_<k>.
   int max_instances = 1;
   static constexpr int kMaxInstances = 32;  // (InstanceTracks::kMaxInstances)
+  int64_t class_id = -1;   // DOPE's class id in its Detection3DArray; -1: none (the node's ~class_ids may give it)
   Pose model_transform;    // mesh frame -> object (detector) frame; identity by default
 };
 

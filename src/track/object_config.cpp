@@ -111,6 +111,76 @@ std::string resolve_mesh_path(const std::string& mesh, const std::string& base_d
   return (fs::path(base_dir) / p).lexically_normal().string();
 }
 
+namespace {
+
+/// The checks every object passes, whichever file layout it came from; resolves its mesh path.
+void check_object(ObjectConfig& o, const std::string& entry, const std::string& origin, const std::string& base_dir,
+                  const PackageResolver& resolve_package, std::set<std::string>& names) {
+  if (!valid_name(o.name))
+    throw std::runtime_error(entry + ": 'name' must be a non-empty identifier [a-zA-Z_][a-zA-Z0-9_]*, got '" +
+                             o.name + "'");
+  const std::string where = origin + ": object '" + o.name + "'";
+  if (!names.insert(o.name).second) throw std::runtime_error(where + ": name used twice");
+  if (o.mesh.empty()) throw std::runtime_error(where + ": 'mesh' is required");
+  if (!(o.mesh_scale > 0) || !std::isfinite(o.mesh_scale))
+    throw std::runtime_error(where + ": 'mesh_scale' must be positive");
+  if (o.mask_label < -1) throw std::runtime_error(where + ": 'mask_label' must be -1 or a label value >= 0");
+  if (o.max_instances < 1 || o.max_instances > ObjectConfig::kMaxInstances)
+    throw std::runtime_error(where + ": 'max_instances' must be in [1, " +
+                             std::to_string(ObjectConfig::kMaxInstances) + "]");
+  if (o.class_id < -1) throw std::runtime_error(where + ": 'class_id' must be -1 (none) or a DOPE class id >= 0");
+  try {
+    o.mesh_path = resolve_mesh_path(o.mesh, base_dir, resolve_package);
+  } catch (const std::exception& e) {  // name the file and the object, not only the URL
+    throw std::runtime_error(where + ": 'mesh' " + e.what());
+  }
+  if (!o.symmetries.empty()) o.symmetric = true;  // declared symmetries are scored with ADD-S too
+}
+
+/// DOPE's own config_pose.yaml: an object per entry of `meshes`, with `mesh_scales`, `class_ids` and the pose
+/// topic `/<topic_publishing>/pose_<name>`. DOPE has already turned the pose it publishes by its
+/// `model_transforms` (and draws the mesh at that pose): the published pose is the mesh's, so no model transform
+/// applies here. DOPE's other keys (weights, dimensions, thresholds, camera topics...) are its own.
+ObjectsConfig parse_dope_config(const YAML::Node& root, const std::string& origin, const std::string& base_dir,
+                                const PackageResolver& resolve_package, const RefinerOptions& base) {
+  ObjectsConfig cfg;
+  cfg.refiner = base;
+  const YAML::Node meshes = root["meshes"];
+  if (!meshes.IsMap() || meshes.size() == 0)
+    throw std::runtime_error(origin + ": DOPE's 'meshes' must map object names to mesh files");
+  // The value of `name` in the map `key`, when both are there.
+  const auto entry_of = [&](const char* key, const std::string& name, YAML::Node* value) {
+    const YAML::Node map = root[key];
+    if (!map) return false;
+    if (!map.IsMap()) throw std::runtime_error(origin + ": DOPE's '" + key + "' must map object names to values");
+    const YAML::Node v = map[name];
+    if (!v) return false;
+    *value = v;
+    return true;
+  };
+  const std::string topic = root["topic_publishing"] ? root["topic_publishing"].as<std::string>() : "dope";
+  std::set<std::string> names;
+  for (const auto& kv : meshes) {
+    ObjectConfig o;
+    o.name = kv.first.as<std::string>();
+    const std::string where = origin + ": meshes." + o.name;
+    try {
+      o.mesh = kv.second.as<std::string>();
+      YAML::Node scale, id;  // (separate nodes: assigning to a yaml-cpp node that refers to one writes into it)
+      if (entry_of("mesh_scales", o.name, &scale)) o.mesh_scale = scale.as<double>();
+      if (entry_of("class_ids", o.name, &id)) o.class_id = id.as<int64_t>();
+    } catch (const YAML::Exception& e) {
+      throw std::runtime_error(where + ": " + e.what());
+    }
+    o.pose_topic = "/" + topic + "/pose_" + o.name;
+    check_object(o, where, origin, base_dir, resolve_package, names);
+    cfg.objects.push_back(o);
+  }
+  return cfg;
+}
+
+}  // namespace
+
 ObjectsConfig parse_objects_config(const std::string& yaml, const std::string& origin, const std::string& base_dir,
                                    const PackageResolver& resolve_package, const RefinerOptions& base) {
   YAML::Node root;
@@ -125,6 +195,13 @@ ObjectsConfig parse_objects_config(const std::string& yaml, const std::string& o
     throw std::runtime_error(origin + ": " + e.what());
   }
   if (!root.IsMap()) throw std::runtime_error(origin + ": expected a mapping with 'objects' (and 'refiner')");
+  if (!root["objects"] && root["meshes"]) {
+    try {
+      return parse_dope_config(root, origin, base_dir, resolve_package, base);
+    } catch (const YAML::Exception& e) {
+      throw std::runtime_error(origin + ": " + e.what());
+    }
+  }
   ObjectsConfig cfg;
   cfg.refiner = base;
   for (const auto& kv : root) {
@@ -156,34 +233,18 @@ ObjectsConfig parse_objects_config(const std::string& yaml, const std::string& o
         else if (key == "mask_label") o.mask_label = kv.second.as<int>();
         else if (key == "pose_topic") o.pose_topic = kv.second.as<std::string>();
         else if (key == "max_instances") o.max_instances = kv.second.as<int>();
+        else if (key == "class_id") o.class_id = kv.second.as<int64_t>();
         else if (key == "model_transform") o.model_transform = read_transform(kv.second, where + ".model_transform");
         else if (key == "symmetries") o.symmetries = read_symmetries(kv.second, where + ".symmetries");
         else
           throw std::runtime_error(where + ": unknown key '" + key +
                                    "' (name, mesh, mesh_scale, symmetric, symmetries, mask_label, pose_topic, "
-                                   "max_instances, model_transform)");
+                                   "max_instances, class_id, model_transform)");
       }
     } catch (const YAML::Exception& e) {
       throw std::runtime_error(where + ": " + e.what());
     }
-    if (!valid_name(o.name))
-      throw std::runtime_error(where + ": 'name' must be a non-empty identifier [a-zA-Z_][a-zA-Z0-9_]*, got '" +
-                               o.name + "'");
-    where = origin + ": object '" + o.name + "'";
-    if (!names.insert(o.name).second) throw std::runtime_error(where + ": name used twice");
-    if (o.mesh.empty()) throw std::runtime_error(where + ": 'mesh' is required");
-    if (!(o.mesh_scale > 0) || !std::isfinite(o.mesh_scale))
-      throw std::runtime_error(where + ": 'mesh_scale' must be positive");
-    if (o.mask_label < -1) throw std::runtime_error(where + ": 'mask_label' must be -1 or a label value >= 0");
-    if (o.max_instances < 1 || o.max_instances > ObjectConfig::kMaxInstances)
-      throw std::runtime_error(where + ": 'max_instances' must be in [1, " +
-                               std::to_string(ObjectConfig::kMaxInstances) + "]");
-    try {
-      o.mesh_path = resolve_mesh_path(o.mesh, base_dir, resolve_package);
-    } catch (const std::exception& e) {  // name the file and the object, not only the URL
-      throw std::runtime_error(where + ": 'mesh' " + e.what());
-    }
-    if (!o.symmetries.empty()) o.symmetric = true;  // declared symmetries are scored with ADD-S too
+    check_object(o, where, origin, base_dir, resolve_package, names);
     cfg.objects.push_back(o);
   }
   // Instances are named <name>_<k> on TF and topics: no other object may carry one of those names.

@@ -341,3 +341,50 @@ TEST(ObjectConfig, LoadObjectMeshAppliesScale) {
     EXPECT_CONTAINS(e.what(), "missing.ply");
   }
 }
+
+TEST(ObjectConfig, ReadsDopesOwnConfigPose) {
+  // DOPE's config_pose.yaml as DOPE ships it (abridged): the objects are those with a mesh; DOPE's own keys are
+  // left to it; its model_transforms are already in the pose it publishes.
+  const PackageResolver resolver = [](const std::string& pkg) { return "/ws/" + pkg; };
+  const std::string dope = R"(
+topic_camera: "/dope/webcam/image_raw"
+topic_camera_info: "/dope/webcam/camera_info"
+topic_publishing: "dope"
+input_is_rectified: True
+downscale_height: 400
+weights: {"cracker": "package://dope/weights/cracker_60.pth", "soup": "package://dope/weights/soup_60.pth"}
+architectures: {"cracker": "dope", "soup": "dope"}
+dimensions: {"cracker": [16.4, 21.3, 7.2], "soup": [6.7, 10.2, 6.8]}
+class_ids: {"cracker": 1, "soup": 3}
+draw_colors: {"cracker": [13, 255, 128], "soup": [0, 0, 255]}
+model_transforms: {"cracker": [[0, 0, 1, 0], [0, -1, 0, 0], [1, 0, 0, 0], [0, 0, 0, 1]]}
+meshes: {"cracker": "file:///meshes/cracker/textured.obj", "soup": "package://dope/meshes/soup/textured.obj"}
+mesh_scales: {"cracker": 0.01, "soup": 0.01}
+thresh_angle: 0.5
+)";
+  const ObjectsConfig cfg = parse(dope, resolver);
+  ASSERT_EQ(cfg.objects.size(), 2u);
+  const ObjectConfig& cracker = cfg.objects[0];
+  EXPECT_EQ(cracker.name, "cracker");
+  EXPECT_EQ(cracker.mesh_path, "/meshes/cracker/textured.obj");
+  EXPECT_DOUBLE_EQ(cracker.mesh_scale, 0.01);
+  EXPECT_EQ(cracker.class_id, 1);
+  EXPECT_EQ(cracker.pose_topic, "/dope/pose_cracker");
+  EXPECT_TRUE(cracker.model_transform.R.isIdentity());  // DOPE applied it already
+  EXPECT_EQ(cfg.objects[1].mesh_path, "/ws/dope/meshes/soup/textured.obj");
+  EXPECT_EQ(cfg.objects[1].class_id, 3);
+  const RefinerOptions d;
+  EXPECT_EQ(cfg.refiner.iterations, d.iterations);
+  // Another publishing namespace, no scales or ids: defaults.
+  const ObjectsConfig other = parse("topic_publishing: my_dope\nmeshes: {box: box.ply}\n");
+  EXPECT_EQ(other.objects[0].pose_topic, "/my_dope/pose_box");
+  EXPECT_DOUBLE_EQ(other.objects[0].mesh_scale, 1.0);
+  EXPECT_EQ(other.objects[0].class_id, -1);
+  // Its values are checked as ours are, naming the file and the entry.
+  EXPECT_CONTAINS(parse_error("meshes: {box: box.ply}\nmesh_scales: {box: -1}\n"), "'mesh_scale' must be positive");
+  EXPECT_CONTAINS(parse_error("meshes: {box: box.ply}\nmesh_scales: {box: big}\n"), "meshes.box");
+  EXPECT_CONTAINS(parse_error("meshes: {bad-name: box.ply}\n"), "'name' must be a non-empty identifier");
+  EXPECT_CONTAINS(parse_error("meshes: [box.ply]\n"), "DOPE's 'meshes' must map");
+  // Our own layout takes a class id too.
+  EXPECT_EQ(parse("objects:\n  - {name: a, mesh: a.ply, class_id: 7}\n").objects[0].class_id, 7);
+}

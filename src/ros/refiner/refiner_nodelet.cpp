@@ -78,6 +78,9 @@ void RefinerNodelet::loadObjects() {
     if (settings_.objects_config.empty())
       throw std::runtime_error("~objects_config is not set (path to the objects YAML)");
     cfg = diffdope::load_objects_config(settings_.objects_config, resolver);
+    // Class ids the objects file gives (DOPE's config_pose.yaml has them); ~class_ids, when set, wins.
+    for (const diffdope::ObjectConfig& o : cfg.objects)
+      if (o.class_id >= 0) settings_.class_ids.emplace(o.name, o.class_id);
     refiner_options_ = cfg.refiner;
     // The optional refiner file overrides the objects file's refiner section (launch-time tuning).
     if (!settings_.refiner_config.empty())
