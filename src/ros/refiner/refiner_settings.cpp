@@ -85,10 +85,12 @@ RefinerSettings load_refiner_settings(const ros::NodeHandle& pnh, const std::str
   s.publish_implausible = pnh.param("publish_implausible", s.publish_implausible);
   // on_request also seeds from its own previous results ("refine again" on a newer frame).
   s.track.tracking = s.mode != StreamMode::kContinuous;
-  s.track.max_detection_age = pnh.param("max_detection_age", 1.0);
-  s.track.track_timeout = pnh.param("track_timeout", 3.0);
-  s.track.max_failures = pnh.param("max_track_failures", 2);
-  s.track.predict = pnh.param("predict_motion", true);
+  const diffdope::TrackOptions track_defaults;  // one source of the defaults: TrackOptions
+  s.track.max_detection_age = pnh.param("max_detection_age", track_defaults.max_detection_age);
+  s.track.track_timeout = pnh.param("track_timeout", track_defaults.track_timeout);
+  s.track.max_failures = pnh.param("max_track_failures", track_defaults.max_failures);
+  s.track.predict = pnh.param("predict_motion", track_defaults.predict);
+  s.track.max_extrapolation = pnh.param("max_extrapolation", track_defaults.max_extrapolation);
   s.error_throttle = pnh.param("error_throttle", s.error_throttle);
   s.objects_config = pnh.param<std::string>("objects_config", "");
   s.refiner_config = pnh.param<std::string>("refiner_config", "");
