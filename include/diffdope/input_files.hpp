@@ -28,6 +28,8 @@ long long parse_integer_arg(const std::string& flag, const std::string& text, lo
 /// A command-line value that must be a finite number ("--rate: expected a number, got 'fast'"); ranges are the
 /// caller's.
 double parse_number_arg(const std::string& flag, const std::string& text);
+/// The same in [lo, hi] ("--holes: 2 is outside [0, 1]").
+double parse_number_arg(const std::string& flag, const std::string& text, double lo, double hi);
 
 /// The whole file as text; std::runtime_error "<path>: cannot open <what>: ..." when it is missing, not a regular
 /// file (a pipe or device could block forever) or unreadable, and when it exceeds input_limits::kMaxTextFileBytes.

@@ -193,6 +193,16 @@ double parse_number_arg(const std::string& flag, const std::string& text) {
   return x;
 }
 
+double parse_number_arg(const std::string& flag, const std::string& text, double lo, double hi) {
+  const double x = parse_number_arg(flag, text);
+  if (x < lo || x > hi) {
+    std::ostringstream m;
+    m << flag << ": " << text << " is outside [" << lo << ", " << hi << "]";
+    throw std::invalid_argument(m.str());
+  }
+  return x;
+}
+
 void check_yaml_expansion(const YAML::Node& root, const std::string& origin) {
   long long nodes = input_limits::kMaxYamlNodes;
   count_yaml_nodes(root, origin, nodes, 0);

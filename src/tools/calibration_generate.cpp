@@ -77,11 +77,8 @@ int generate_calibration_set(const GenerateOptions& o) {
     }
     RobotSceneOptions scene;
     scene.table = o.table;
-    scene.occluder = k % 3 == 1;
-    scene.noise.depth_sigma_at_1m = o.depth_sigma_at_1m;
-    scene.noise.depth_noise_grain_px = o.depth_noise_grain_px;
-    scene.noise.hole_fraction = o.hole_fraction;
-    scene.noise.flying_pixel_fraction = o.flying_pixel_fraction;  // every third capture has a box floating in front of the upper arm
+    scene.occluder = k % 3 == 1;  // every third capture has a box floating in front of the upper arm
+    scene.noise = o.noise;
     const SyntheticScene s = synthesize_robot_scene(*renderer, cam, arm, camera_from_base, scene,
                                                     uint32_t(o.seed * 1000 + k));
     char name[16];

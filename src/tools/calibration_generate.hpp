@@ -4,6 +4,8 @@
 #include <cstdint>
 #include <string>
 
+#include "diffdope/procedural_robot.hpp"
+
 namespace diffdope::tools {
 
 struct GenerateOptions {
@@ -14,9 +16,9 @@ struct GenerateOptions {
   bool masks = true, rgb = true;
   bool table = true;                   // the arm on a table, a box and a can beside its base
   bool eye_in_hand = false;            // the camera on the hand's bracket instead of on a stand
-  /// The depth camera: noise (metres at 1 m, growing with z^2), the share of pixels in dropout holes, and the
-  /// share of the silhouettes' border pixels that read a mixed depth (SyntheticNoise).
-  double depth_sigma_at_1m = 0.002, depth_noise_grain_px = 0, hole_fraction = 0.05, flying_pixel_fraction = 0;
+  /// The depth camera (and the colour's noise): the generated arm's defaults, changed by --depth-noise,
+  /// --noise-grain, --holes and --flying-pixels.
+  SyntheticNoise noise = RobotSceneOptions().noise;
 };
 
 /// Writes DIR/robot/ (URDF and meshes), DIR/captures/NN/ (depth.png, joints.json, rgb.png, mask.png),

@@ -367,19 +367,11 @@ int main(int argc, char** argv) {
         gen.init_deg = parse_number_arg(k, argv[++i]);
         if (gen.init_cm < 0 || gen.init_deg < 0 || gen.init_cm > 100 || gen.init_deg > 90)
           return usage_error("--init-error: CM in [0, 100], DEG in [0, 90]");
-      } else if (k == "--depth-noise") {
-        gen.depth_sigma_at_1m = 0.001 * parse_number_arg(k, v);
-        if (!(gen.depth_sigma_at_1m >= 0 && gen.depth_sigma_at_1m <= 0.05))
-          return usage_error("--depth-noise: millimetres at 1 m in [0, 50]");
-      } else if (k == "--noise-grain") {
-        gen.depth_noise_grain_px = parse_number_arg(k, v);
-        if (!(gen.depth_noise_grain_px >= 0 && gen.depth_noise_grain_px <= 10))
-          return usage_error("--noise-grain: pixels in [0, 10]");
-      } else if (k == "--holes" || k == "--flying-pixels") {
-        double& f = k == "--holes" ? gen.hole_fraction : gen.flying_pixel_fraction;
-        f = parse_number_arg(k, v);
-        if (!(f >= 0 && f <= 1)) return usage_error(k + ": a fraction in [0, 1]");
-      } else return usage_error("unknown option '" + k + "'");
+      } else if (k == "--depth-noise") gen.noise.depth_sigma_at_1m = 0.001 * parse_number_arg(k, v, 0, 50);
+      else if (k == "--noise-grain") gen.noise.depth_noise_grain_px = parse_number_arg(k, v, 0, 10);
+      else if (k == "--holes") gen.noise.hole_fraction = parse_number_arg(k, v, 0, 1);
+      else if (k == "--flying-pixels") gen.noise.flying_pixel_fraction = parse_number_arg(k, v, 0, 1);
+      else return usage_error("unknown option '" + k + "'");
     }
     if (!(a.depth_scale > 0)) return usage_error("--depth-scale must be positive");
     if (a.camera_frame.empty()) return usage_error("--camera-frame: empty frame name");

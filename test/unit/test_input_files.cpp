@@ -212,3 +212,16 @@ TEST_F(InputFiles, FloatColourMustBeFiniteAndInRange) {
   f.at<cv::Vec3f>(1, 1)[2] = 1.004f;  // rounding: clamped
   EXPECT_FLOAT_EQ(to_rgb_float(f, false).at<cv::Vec3f>(1, 1)[2], 1.0f);
 }
+
+TEST(CommandLineNumbers, ANumberInItsRange) {
+  EXPECT_DOUBLE_EQ(parse_number_arg("--holes", "0.25", 0, 1), 0.25);
+  EXPECT_DOUBLE_EQ(parse_number_arg("--holes", "1", 0, 1), 1.0);
+  try {
+    parse_number_arg("--holes", "2", 0, 1);
+    ADD_FAILURE() << "2 accepted in [0, 1]";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_EQ(std::string(e.what()), "--holes: 2 is outside [0, 1]");
+  }
+  EXPECT_THROW(parse_number_arg("--holes", "nan", 0, 1), std::invalid_argument);
+  EXPECT_THROW(parse_number_arg("--holes", "0.5x", 0, 1), std::invalid_argument);
+}

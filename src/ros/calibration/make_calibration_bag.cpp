@@ -49,14 +49,6 @@ std::string pose_list(const Pose& p) {
   return b;
 }
 
-double bounded(const std::string& flag, const std::string& text, double low, double high) {
-  const double v = parse_number_arg(flag, text);
-  if (!(v >= low && v <= high))
-    throw std::invalid_argument(flag + ": " + text + " is outside [" + std::to_string(low) + ", " +
-                                std::to_string(high) + "]");
-  return v;
-}
-
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -83,9 +75,9 @@ int main(int argc, char** argv) {
       else if (k == "--configurations") configurations = int(parse_integer_arg(k, v, 1, 20));
       else if (k == "--rate") rate = double(parse_integer_arg(k, v, 1, 30));
       else if (k == "--seed") seed = parse_integer_arg(k, v, 0, 1LL << 40);
-      else if (k == "--depth-noise") scene.noise.depth_sigma_at_1m = 0.001 * bounded(k, v, 0, 50);
-      else if (k == "--noise-grain") scene.noise.depth_noise_grain_px = bounded(k, v, 0, 10);
-      else if (k == "--flying-pixels") scene.noise.flying_pixel_fraction = bounded(k, v, 0, 1);
+      else if (k == "--depth-noise") scene.noise.depth_sigma_at_1m = 0.001 * parse_number_arg(k, v, 0, 50);
+      else if (k == "--noise-grain") scene.noise.depth_noise_grain_px = parse_number_arg(k, v, 0, 10);
+      else if (k == "--flying-pixels") scene.noise.flying_pixel_fraction = parse_number_arg(k, v, 0, 1);
       else throw std::invalid_argument("unknown option '" + k + "'");
     }
     if (out.empty()) throw std::invalid_argument("--out DIR is required");
