@@ -20,7 +20,7 @@ class ErrorReporter {
   /// when `throttled` is false (the answer to one deliberate request, such as a refused reconfigure).
   void error(const std::string& category, const std::string& message, bool throttled = true);
   /// The same at WARN level; warnings are counted but do not become last_error.
-  void warn(const std::string& category, const std::string& message);
+  void warn(const std::string& category, const std::string& message, bool throttled = true);
 
   struct Summary {
     std::string last_error;

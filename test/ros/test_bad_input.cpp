@@ -262,6 +262,14 @@ TEST(BadInput, EachBadMessageIsReported) {
   ros::WallDuration(0.3).sleep();
   n.publishGoodUntilError("no transform from 'nowhere'");
 
+  // A detection stamped far after the images (a detector on another clock) waits for a later image, said so.
+  auto ahead = n.detection(n.truth_box, "camera_color_optical_frame");
+  ahead.header.stamp += ros::Duration(100.0);
+  n.det_box.publish(ahead);
+  ros::WallDuration(0.3).sleep();
+  n.publishGoodUntilError("s after the image at");
+  EXPECT_NE(n.waitForDiagnostics("kept for a later image").find("kept for a later image"), std::string::npos);
+
   diffdope_ros::InitialPoseArray unknown;
   diffdope_ros::InitialPose ip;
   ip.name = "teapot";

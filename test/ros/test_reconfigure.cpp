@@ -1,7 +1,8 @@
 // rostest (reconfigure.test): runtime tuning through dynamic_reconfigure while a bag plays. The values at start
 // are the node's own (the objects YAML, then ~parameters), a change reaches the next frames (iterations and
-// runs of every published result), mode on_request stops streaming and tracking resumes it, and a set of values
-// the options' checks refuse (lr_low > lr_high) is reverted as a whole while the node keeps refining.
+// runs of every published result), a value clamped to its range's bound is said and iterations 0 is never
+// plausible, mode on_request stops streaming and tracking resumes it, and a set of values the options' checks
+// refuse (lr_low > lr_high) is reverted as a whole while the node keeps refining.
 #include <dynamic_reconfigure/Reconfigure.h>
 #include <gtest/gtest.h>
 #include <ros/ros.h>
@@ -18,6 +19,7 @@ const char* kService = "/diffdope_refiner/set_parameters";
 struct Received {
   ros::WallTime at;
   std::vector<int> iterations;  // of every result
+  std::vector<bool> plausible;
 };
 
 struct World {
@@ -25,15 +27,23 @@ struct World {
   std::vector<Received> arrays;
   void onRefined(const diffdope_ros::RefinedPoseArrayConstPtr& m) {
     Received r{ros::WallTime::now(), {}};
-    for (const auto& p : m->poses) r.iterations.push_back(p.iterations);
+    for (const auto& p : m->poses) r.iterations.push_back(p.iterations), r.plausible.push_back(p.plausible);
     std::lock_guard<std::mutex> l(mutex);
     arrays.push_back(r);
   }
   int refusals_logged = 0;
+  std::vector<std::string> warnings;
   void onLog(const rosgraph_msgs::LogConstPtr& m) {
-    if (m->level < rosgraph_msgs::Log::ERROR || m->msg.find("reconfigure refused") == std::string::npos) return;
     std::lock_guard<std::mutex> l(mutex);
+    if (m->level == rosgraph_msgs::Log::WARN) warnings.push_back(m->msg);
+    if (m->level < rosgraph_msgs::Log::ERROR || m->msg.find("reconfigure refused") == std::string::npos) return;
     ++refusals_logged;
+  }
+  bool warned(const std::string& needle) {
+    std::lock_guard<std::mutex> l(mutex);
+    for (const auto& w : warnings)
+      if (w.find(needle) != std::string::npos) return true;
+    return false;
   }
   int refusals() {
     std::lock_guard<std::mutex> l(mutex);
@@ -154,6 +164,30 @@ TEST(Reconfigure, ChangesTakeEffectAtTheNextFramesAndBadSetsAreReverted) {
       on_track_budget += it == 5;
     }
   EXPECT_GT(on_track_budget, 0) << "no frame refined on the tracking budget";
+
+  // iterations -5: the server clamps it to 0 before the node sees it. The node says that the value sits at its
+  // range's bound, and never calls an unrefined start plausible.
+  dynamic_reconfigure::Config none;
+  add(none.ints, "iterations", -5);
+  EXPECT_EQ(intValue(set(none), "iterations"), 0);
+  for (int i = 0; i < 100 && !world->warned("iterations 0 (range 0 to 10000)"); ++i) ros::WallDuration(0.05).sleep();
+  EXPECT_TRUE(world->warned("iterations 0 (range 0 to 10000)")) << "a clamped value was not said";
+  const ros::WallTime unrefined = ros::WallTime::now();
+  ASSERT_TRUE(waitForArrays(unrefined, 4, 60)) << "no frames refined with iterations 0";
+  const auto zero = world->since(unrefined);
+  int unrefined_results = 0;
+  std::string seen;
+  for (size_t i = 1; i < zero.size(); ++i)
+    for (size_t k = 0; k < zero[i].iterations.size(); ++k) {
+      seen += " " + std::to_string(zero[i].iterations[k]) + (zero[i].plausible[k] ? "+" : "-");
+      if (zero[i].iterations[k] != 0) continue;
+      EXPECT_FALSE(zero[i].plausible[k]);
+      ++unrefined_results;
+    }
+  EXPECT_GT(unrefined_results, 0) << "iterations (+ plausible) of the results:" << seen;
+  dynamic_reconfigure::Config again;
+  add(again.ints, "iterations", 12);
+  EXPECT_EQ(intValue(set(again), "iterations"), 12);
 
   // on_request: streaming stops (one refinement may be in flight); tracking: it resumes.
   dynamic_reconfigure::Config stop;

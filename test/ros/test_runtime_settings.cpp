@@ -106,3 +106,35 @@ TEST(RuntimeSettings, RefusesWhatTheYamlRefuses) {
   refused([](diffdope_ros::RefinerConfig& c) { c.max_track_failures = 0; });
   refused([](diffdope_ros::RefinerConfig& c) { c.image_scale = std::nan(""); });
 }
+
+// A change is named with both values; one at a bound of its range is flagged, since dynamic_reconfigure clamps a
+// request outside the range (iterations -5, batch_size 100000, weight_depth inf) to that bound without a word.
+TEST(RuntimeSettings, ChangesAreNamedAndValuesAtABoundAreFlagged) {
+  const diffdope_ros::RefinerConfig before = diffdope_ros::to_config(RuntimeSettings());
+  diffdope_ros::RefinerConfig after = before;
+  after.iterations = 12;
+  after.mode = "on_request";
+  after.publish_implausible = true;
+  auto changes = diffdope_ros::config_changes(before, after);
+  ASSERT_EQ(changes.size(), 3u);
+  EXPECT_EQ(diffdope_ros::describe(changes),
+            "mode tracking -> on_request, iterations 48 -> 12, publish_implausible false -> true");
+  EXPECT_EQ(diffdope_ros::bound_warning(changes), "");
+  EXPECT_TRUE(diffdope_ros::config_changes(before, before).empty());
+
+  after = before;
+  after.__clamp__();  // (the defaults are inside every range)
+  EXPECT_TRUE(diffdope_ros::config_changes(before, after).empty());
+  after.iterations = -5;
+  after.batch_size = 100000;
+  after.weight_depth = std::numeric_limits<double>::infinity();
+  after.__clamp__();  // what the server does to a request before the node's callback sees it
+  changes = diffdope_ros::config_changes(before, after);
+  ASSERT_EQ(changes.size(), 3u);
+  for (const auto& c : changes) EXPECT_TRUE(c.at_bound) << c.name;
+  const std::string warning = diffdope_ros::bound_warning(changes);
+  EXPECT_NE(warning.find("iterations 0 (range 0 to 10000)"), std::string::npos) << warning;
+  EXPECT_NE(warning.find("batch_size 1024 (range 1 to 1024)"), std::string::npos) << warning;
+  EXPECT_NE(warning.find("weight_depth 1000 (range 0 to 1000)"), std::string::npos) << warning;
+  EXPECT_NE(warning.find("clamps"), std::string::npos) << warning;
+}

@@ -40,14 +40,14 @@ void ErrorReporter::error(const std::string& given_category, const std::string& 
   }
 }
 
-void ErrorReporter::warn(const std::string& given_category, const std::string& message) {
+void ErrorReporter::warn(const std::string& given_category, const std::string& message, bool throttled) {
   const double now = ros::WallTime::now().toSec();
   bool log;
   {
     std::lock_guard<std::mutex> lock(mutex_);
     const std::string& category = bounded(summary_.warn_counts, given_category);
     ++summary_.warn_counts[category];
-    log = should_log("W" + category, now);
+    log = should_log("W" + category, now) || !throttled;
   }
   if (log) ROS_WARN_STREAM_NAMED("diffdope", message);
 }

@@ -30,6 +30,7 @@ void RefinerNodelet::onReconfigure(RefinerConfig& config, uint32_t level) {
     config = applied_config_;  // the server publishes what is in force
     return;
   }
+  const std::vector<ConfigChange> changes = config_changes(applied_config_, config);
   runtime_settings_ = settings;
   applied_config_ = config;
   if (level == ~0u) return;  // setCallback's first call: the values the node started with
@@ -39,10 +40,10 @@ void RefinerNodelet::onReconfigure(RefinerConfig& config, uint32_t level) {
     if (settings.mode == StreamMode::kOnRequest) frame_pending_ = false;  // nothing more is streamed, not even that one
   }
   mode_ = settings.mode;  // the input callbacks read it; the rest the worker takes at its next job
-  NODELET_INFO_STREAM("reconfigured: mode " << to_string(settings.mode) << ", " << settings.refiner.batch_size
-                                            << " runs x " << settings.refiner.iterations
-                                            << " iterations, image scale " << settings.refiner.image_scale
-                                            << " (from the next frame)");
+  NODELET_INFO_STREAM("reconfigured (from the next frame): " << (changes.empty() ? "no value changed"
+                                                                                 : describe(changes)));
+  const std::string bound = bound_warning(changes);
+  if (!bound.empty()) errors_.warn("reconfigure", "reconfigured value " + bound, false);
 }
 
 }  // namespace diffdope_ros

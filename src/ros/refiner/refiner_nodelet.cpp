@@ -92,6 +92,15 @@ void RefinerNodelet::loadObjects() {
     launch.__fromServer__(pnh);
     launch.mode = to_string(mode_);  // (read with the settings, with its own message)
     const RuntimeSettings settings = from_config(launch, launch_values);
+    // Said at start: a value set through dynamic_reconfigure stays on the parameter server, so a restarted node
+    // takes it instead of the YAML's.
+    const std::vector<ConfigChange> overrides = config_changes(to_config(launch_values), launch);
+    if (!overrides.empty())
+      NODELET_INFO_STREAM("~parameters override the YAML: " << describe(overrides)
+                                                           << " (a value set through dynamic_reconfigure stays on "
+                                                              "the parameter server until deleted)");
+    const std::string bound = bound_warning(overrides);
+    if (!bound.empty()) errors_.warn("parameters", "~parameter " + bound);
     refiner_options_ = settings.refiner;
     track_options_ = settings.track;
     if (!settings_.device.empty()) refiner_options_.device = settings_.device;
