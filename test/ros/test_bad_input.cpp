@@ -278,12 +278,21 @@ TEST(BadInput, EachBadMessageIsReported) {
   n.initial_poses.publish(unknown);
   n.waitForError("unknown object name 'teapot'");
 
-  // Depth and mask stop: rgb + camera_info alone never form a synchronized set.
+  // Every input pauses for 4 s, then depth and mask stay away: rgb + camera_info alone never form a synchronized
+  // set. The time given counts from when rgb came back, not from the last set before the pause.
+  ros::WallDuration(4.0).sleep();
   for (int i = 0; i < 15; ++i) {
     n.publishSet(n.good_rgb, n.good_info, n.good_depth, n.good_mask, false);
     ros::WallDuration(0.2).sleep();
   }
-  n.waitForError("no synchronized input");
+  const std::string no_sync = "no synchronized input for ";
+  n.waitForError(no_sync);
+  {
+    std::lock_guard<std::mutex> l(n.mutex);
+    for (const auto& e : n.errors)
+      if (e.find(no_sync) != std::string::npos)
+        EXPECT_LT(std::atof(e.c_str() + e.find(no_sync) + no_sync.size()), 3.5) << e;
+  }
 
   diffdope_ros::Refine srv;
   srv.request.object_names = {"teapot"};

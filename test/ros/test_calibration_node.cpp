@@ -2,9 +2,10 @@
 // holding still in four configurations and moving between them, watched by a camera on a stand or on its hand.
 // Samples are refused while it moves or has not moved; four samples from a guess 5 cm / 10 degrees off
 // calibrate the camera within 2 mm / 0.2 degrees; the static TF and the saved YAML carry the result; samples
-// can be removed. ~mount_frame: the frame the result is in (base_link; link5 eye in hand).
+// can be removed; a joint state the node cannot use is the cause its reply gives. ~mount_frame: the frame the result is in (base_link; link5 eye in hand).
 #include <gtest/gtest.h>
 #include <ros/ros.h>
+#include <sensor_msgs/JointState.h>
 #include <std_srvs/Trigger.h>
 #include <tf2_ros/buffer.h>
 #include <tf2_ros/static_transform_broadcaster.h>
@@ -108,6 +109,39 @@ TEST(CalibrationNode, SamplesComputeTfAndSave) {
   ASSERT_TRUE(ros::service::call(kNode + "remove_sample", remove));
   EXPECT_FALSE(remove.response.success);
   EXPECT_NE(remove.response.message.find("no sample 7"), std::string::npos);
+}
+
+// Joint states the node cannot use are named in ~take_sample's reply, not only in the log. First a reading of a
+// joint the robot does not have, stamped at 1 s (the clock "went back": the history restarts and keeps
+// nothing of it), then one with a NaN position: the reply says both that no usable state is there and why.
+TEST(CalibrationNode, ARejectedJointStateIsTheCauseTheReplyGives) {
+  ros::NodeHandle nh;
+  ros::Publisher joints = nh.advertise<sensor_msgs::JointState>("/joint_states", 5);
+  for (int i = 0; i < 100 && joints.getNumSubscribers() == 0; ++i) ros::WallDuration(0.05).sleep();
+  ASSERT_GT(joints.getNumSubscribers(), 0u);
+  ASSERT_GT(ros::Time::now().toSec(), 20.0) << "the bag's clock starts too early for this test";
+  const ros::Time back(1.0);
+  sensor_msgs::JointState ghost;
+  ghost.header.stamp = back;
+  ghost.name = {"ghost_joint"};
+  ghost.position = {0.1};
+  joints.publish(ghost);
+  sensor_msgs::JointState broken;
+  broken.header.stamp = back + ros::Duration(0.1);
+  broken.name = {"joint1", "joint2"};
+  broken.position = {0.2, std::numeric_limits<double>::quiet_NaN()};
+  joints.publish(broken);
+  std::string reply;
+  for (int i = 0; i < 50 && reply.find("ignored") == std::string::npos; ++i) {
+    ros::WallDuration(0.1).sleep();
+    std_srvs::Trigger t;
+    ASSERT_TRUE(ros::service::call(kNode + "take_sample", t));
+    EXPECT_FALSE(t.response.success);
+    reply = t.response.message;
+  }
+  EXPECT_NE(reply.find("no joint states received"), std::string::npos) << reply;
+  EXPECT_NE(reply.find("the latest joint_states message was ignored: joint 'joint2' is not finite"), std::string::npos)
+      << reply;
 }
 
 int main(int argc, char** argv) {
