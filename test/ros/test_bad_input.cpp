@@ -5,6 +5,8 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <ros/network.h>
+#include <xmlrpcpp/XmlRpcClient.h>
 #include <ros/ros.h>
 #include <rosbag/bag.h>
 #include <rosbag/view.h>
@@ -13,6 +15,7 @@
 #include <sensor_msgs/Image.h>
 #include <topic_tools/shape_shifter.h>
 
+#include <fstream>
 #include <functional>
 #include <mutex>
 #include <tuple>
@@ -512,6 +515,101 @@ TEST(BadInput, DopesDetectionArrayIsReadAndBadOnesAreReported) {
   EXPECT_EQ(counts.find("unusable 0"), std::string::npos) << counts;
 }
 
+/// The process id of ROS node `name` (its XML-RPC getPid), -1 when it cannot be asked.
+int nodePid(const std::string& name) {
+  XmlRpc::XmlRpcValue args, result, uri;
+  args[0] = ros::this_node::getName();
+  args[1] = name;
+  if (!ros::master::execute("lookupNode", args, result, uri, true)) return -1;
+  std::string host;
+  uint32_t port = 0;
+  if (!ros::network::splitURI(std::string(uri), host, port)) return -1;
+  XmlRpc::XmlRpcClient client(host.c_str(), int(port), "/");
+  XmlRpc::XmlRpcValue pid_args, pid;
+  pid_args[0] = ros::this_node::getName();
+  if (!client.execute("getPid", pid_args, pid) || pid.getType() != XmlRpc::XmlRpcValue::TypeArray) return -1;
+  return int(pid[2]);
+}
+/// Resident memory of process `pid` in MB (-1 when unknown).
+double residentMb(int pid) {
+  std::ifstream status("/proc/" + std::to_string(pid) + "/status");
+  std::string line;
+  while (std::getline(status, line))
+    if (line.rfind("VmRSS:", 0) == 0) return std::atof(line.c_str() + 6) / 1024.0;
+  return -1;
+}
+
+// Floods of hostile messages: depth images of 300 different sizes, and Detection3DArrays of 10,000 detections.
+// The log stays throttled (one category per input), the diagnostics message stays small, the node's memory does
+// not grow with the flood, and it still refines a good frame afterwards.
+TEST(BadInput, FloodsKeepTheLogTheDiagnosticsAndTheMemoryBounded) {
+  Node& n = *node;
+  const int pid = nodePid("/diffdope_manager");
+  ASSERT_GT(pid, 0) << "cannot ask /diffdope_manager for its pid";
+  const double before_mb = residentMb(pid);
+  const auto count_errors = [&](const std::string& needle) {
+    std::lock_guard<std::mutex> l(n.mutex);
+    return std::count_if(n.errors.begin(), n.errors.end(),
+                         [&](const std::string& e) { return e.find(needle) != std::string::npos; });
+  };
+  const std::string unregistered = "register it to the rgb camera";
+  const long logged_before = count_errors(unregistered);
+  const ros::WallTime start = ros::WallTime::now();
+  for (int i = 0; i < 300; ++i) {
+    auto depth = n.good_depth;  // each a size of its own, none the rgb's
+    depth.width = 40 + uint32_t(i);
+    depth.height = 30 + uint32_t(i % 97);
+    depth.step = depth.width * 4;
+    depth.data.assign(size_t(depth.step) * depth.height, 0x3f);
+    n.publishSet(n.good_rgb, n.good_info, depth, n.good_mask);
+    ros::WallDuration(0.01).sleep();
+  }
+  {
+    diffdope_ros::test::Writer w;
+    const ros::Time stamp = ros::Time::now();
+    w.header(0, stamp.sec, stamp.nsec, "camera_color_optical_frame");
+    const uint32_t count = 10000;
+    w.put<uint32_t>(count);
+    const auto q = n.truth_box.quaternion_xyzw();
+    for (uint32_t k = 0; k < count; ++k) {
+      w.header(0, stamp.sec, stamp.nsec, "camera_color_optical_frame");
+      w.put<uint32_t>(1);
+      w.hypothesis_at(k % 3 == 0 ? 1 : 1000 + k, 0.5, n.truth_box.t.x(), n.truth_box.t.y(), n.truth_box.t.z(), q[0], q[1],
+                      q[2], q[3]);
+      w.box_and_empty_cloud();
+    }
+    topic_tools::ShapeShifter shape;
+    shape.morph(diffdope_ros::kDetection3DArrayMd5, diffdope_ros::kDetection3DArrayType, "", "");
+    ros::Publisher pub = shape.advertise(n.nh, "/dope/detected_objects", 5);
+    for (int i = 0; i < 100 && pub.getNumSubscribers() == 0; ++i) ros::WallDuration(0.05).sleep();
+    for (int i = 0; i < 20; ++i) {
+      topic_tools::ShapeShifter m;
+      m.morph(diffdope_ros::kDetection3DArrayMd5, diffdope_ros::kDetection3DArrayType, "", "");
+      ros::serialization::IStream in(w.bytes.data(), uint32_t(w.bytes.size()));
+      m.read(in);
+      pub.publish(m);
+      n.publishGood();
+      ros::WallDuration(0.1).sleep();
+    }
+  }
+  const double seconds = (ros::WallTime::now() - start).toSec() + 1.0;
+  ros::WallDuration(1.5).sleep();  // (the last log lines and a diagnostics message)
+  // ~error_throttle is 0.2 s here: one line per input per period at most, not one per message.
+  EXPECT_GT(count_errors(unregistered), logged_before);
+  EXPECT_LE(count_errors(unregistered) - logged_before, long(seconds / 0.2) + 2);
+  const std::string text = n.waitForDiagnostics("refiner", 3.0);
+  EXPECT_LT(text.size(), 8000u) << text;
+  const double after_mb = residentMb(pid);
+  std::printf("diffdope_manager: %.0f MB before the flood, %.0f MB after; diagnostics %zu bytes\n", before_mb,
+              after_mb, text.size());
+  EXPECT_LT(after_mb - before_mb, 100.0);
+  const int refined = [&] {
+    std::lock_guard<std::mutex> l(n.mutex);
+    return n.refined_box_count;
+  }();
+  n.refineBoxFrom(refined, [&] { n.det_box.publish(n.detection(n.truth_box, "camera_color_optical_frame")); },
+                  "no refined pose after the floods");
+}
 
 bool loadGoodFrame(Node& n, const std::string& bag_path) {
   rosbag::Bag bag(bag_path, rosbag::bagmode::Read);
