@@ -257,6 +257,14 @@ struct RefineResult {
 /// The names of the terms a loss weighs (weight > 0): "rgb", "depth", "mask", "edges", "texture".
 std::vector<std::string> used_terms(const LossOptions& loss);
 
+/// A result's verdict in three states. Undetermined: nothing was refined (an `error`, or no iteration run) or
+/// no evidence could judge the pose (`judged` false: colour alone without a mask, on a model without print).
+enum class VerdictState { kPlausible, kImplausible, kUndetermined };
+VerdictState verdict_state(const RefineResult& r);
+const char* to_string(VerdictState state);  // "plausible", "implausible", "undetermined"
+/// Why a result's verdict is undetermined, for a user ("" when it was judged).
+std::string undetermined_reason(const RefineResult& r);
+
 /// Whether the retry of a rejected result (RefinerOptions::retry_turn) replaces the first: only when the verdict
 /// accepts it, and its loss is lower or (`weigh_print`: the verdict weighs this object's print) its print
 /// registers kClearPrint standard deviations better than the first's (one below chance counting as 0): the colour

@@ -101,6 +101,29 @@ std::vector<std::string> used_terms(const LossOptions& l) {
   return out;
 }
 
+VerdictState verdict_state(const RefineResult& r) {
+  if (!r.error.empty() || r.iterations == 0 || !r.judged) return VerdictState::kUndetermined;
+  return r.plausible ? VerdictState::kPlausible : VerdictState::kImplausible;
+}
+
+const char* to_string(VerdictState state) {
+  switch (state) {
+    case VerdictState::kPlausible: return "plausible";
+    case VerdictState::kImplausible: return "implausible";
+    case VerdictState::kUndetermined: return "undetermined";
+  }
+  return "?";
+}
+
+std::string undetermined_reason(const RefineResult& r) {
+  if (!r.error.empty()) return "not refined: " + r.error;
+  if (r.iterations == 0) return "not refined: no iteration run (iterations 0)";
+  if (!r.judged)
+    return "nothing could judge the pose: no mask, no depth, and a model without print to register (colour "
+           "alone)";
+  return "";
+}
+
 bool retry_replaces(const RefineResult& first, const RefineResult& retry, bool weigh_print) {
   if (!retry.error.empty() || !retry.plausible) return false;
   if (retry.loss.total < first.loss.total) return true;

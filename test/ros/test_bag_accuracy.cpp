@@ -229,6 +229,18 @@ TEST(BagAccuracy, RefinedPosesTfAndScores) {
       else EXPECT_EQ(p.depth_inliers, -1.0);
       EXPECT_GT(p.iterations, 0);
       EXPECT_GT(p.time_ms, 0.0);
+      // What was checked: the terms used, and a verdict in three states that agrees with plausible and judged
+      // (the bag's objects all carry print, so the colour alone can judge them too).
+      const auto used = [&](const std::string& term) {
+        return std::find(p.terms.begin(), p.terms.end(), term) != p.terms.end();
+      };
+      EXPECT_TRUE(used("rgb"));
+      EXPECT_EQ(used("depth"), has_depth);
+      EXPECT_EQ(used("mask"), has_mask || has_depth);  // without a mask, the pixels derived from depth
+      EXPECT_TRUE(p.judged);
+      EXPECT_EQ(p.verdict, p.plausible ? diffdope_ros::RefinedPose::PLAUSIBLE : diffdope_ros::RefinedPose::IMPLAUSIBLE);
+      EXPECT_EQ(p.error, "");
+      if (!has_mask && !has_depth) EXPECT_TRUE(std::isfinite(p.print_significance));
       // The best pose seen (the start itself when already optimal), unless the print alignment then turned it:
       // it may trade up to kPrintLossTolerance of loss for a clearly better print (RefineResult::print_turn).
       EXPECT_LE(p.loss, (1 + diffdope::kPrintLossTolerance) * p.initial_loss);

@@ -20,6 +20,8 @@ struct Received {
   ros::WallTime at;
   std::vector<int> iterations;  // of every result
   std::vector<bool> plausible;
+  std::vector<int> verdicts;
+  std::vector<std::string> errors;
 };
 
 struct World {
@@ -27,7 +29,12 @@ struct World {
   std::vector<Received> arrays;
   void onRefined(const diffdope_ros::RefinedPoseArrayConstPtr& m) {
     Received r{ros::WallTime::now(), {}};
-    for (const auto& p : m->poses) r.iterations.push_back(p.iterations), r.plausible.push_back(p.plausible);
+    for (const auto& p : m->poses) {
+      r.iterations.push_back(p.iterations);
+      r.plausible.push_back(p.plausible);
+      r.verdicts.push_back(p.verdict);
+      r.errors.push_back(p.error);
+    }
     std::lock_guard<std::mutex> l(mutex);
     arrays.push_back(r);
   }
@@ -182,6 +189,8 @@ TEST(Reconfigure, ChangesTakeEffectAtTheNextFramesAndBadSetsAreReverted) {
       seen += " " + std::to_string(zero[i].iterations[k]) + (zero[i].plausible[k] ? "+" : "-");
       if (zero[i].iterations[k] != 0) continue;
       EXPECT_FALSE(zero[i].plausible[k]);
+      EXPECT_EQ(zero[i].verdicts[k], diffdope_ros::RefinedPose::UNDETERMINED);
+      EXPECT_NE(zero[i].errors[k].find("iterations 0"), std::string::npos) << zero[i].errors[k];
       ++unrefined_results;
     }
   EXPECT_GT(unrefined_results, 0) << "iterations (+ plausible) of the results:" << seen;

@@ -573,7 +573,7 @@ TEST(Refiner, ARetryReplacesTheFirstResultOnlyWhenAcceptedAndLowerOrClearlyBette
   EXPECT_FALSE(retry_replaces(first, retry, true));
 }
 
-TEST(Refiner, APlainModelGetsNoColourTermUnlessAskedAndTheResultSaysWhichTermsWereUsed) {
+TEST(Refiner, APlainModelGetsNoColourTermUnlessAskedAndTheResultSaysWhichTermsWereUsedAndWhetherItWasJudged) {
   // A grey box against a lit, colourful image of it: the flat colour can only mislead.
   const Mesh plain = make_box(Eigen::Vector3d(0.08, 0.05, 0.12), make_flat_texture(Eigen::Vector3f(0.6f, 0.6f, 0.6f)));
   const Mesh printed = make_box(Eigen::Vector3d(0.08, 0.05, 0.12), make_label_texture(64, 2));
@@ -602,6 +602,26 @@ TEST(Refiner, APlainModelGetsNoColourTermUnlessAskedAndTheResultSaysWhichTermsWe
   Observation rgb_alone = no_mask;
   rgb_alone.depth = cv::Mat();
   EXPECT_EQ(terms(plain, rgb_alone), (T{"rgb"}));  // the only evidence left: kept
+  // Nothing can judge that result (no mask, no depth, no print): its verdict is undetermined, and says why.
+  const RefineResult unjudged = Refiner(o).refine(cam, rgb_alone, plain, truth);
+  EXPECT_FALSE(unjudged.plausible);
+  EXPECT_EQ(verdict_state(unjudged), VerdictState::kUndetermined);
+  EXPECT_NE(undetermined_reason(unjudged).find("nothing could judge"), std::string::npos);
+  const RefineResult judged = Refiner(o).refine(cam, obs, printed, truth);
+  EXPECT_EQ(verdict_state(judged), judged.plausible ? VerdictState::kPlausible : VerdictState::kImplausible);
+  EXPECT_EQ(undetermined_reason(judged), "");
+  RefinerOptions none = o;  // no iteration run: the start is not a refined result, whatever its scores
+  none.iterations = 0;
+  const RefineResult unrefined = Refiner(none).refine(cam, obs, printed, truth);
+  EXPECT_EQ(verdict_state(unrefined), VerdictState::kUndetermined);
+  EXPECT_NE(undetermined_reason(unrefined).find("iterations 0"), std::string::npos);
+  Observation wrong_size = obs;
+  wrong_size.depth = cv::Mat(7, 7, CV_32F, cv::Scalar(0.5));
+  const RefineResult refused = Refiner(o).refine(cam, wrong_size, printed, truth);
+  ASSERT_FALSE(refused.error.empty());
+  EXPECT_EQ(verdict_state(refused), VerdictState::kUndetermined);
+  EXPECT_EQ(undetermined_reason(refused), "not refined: " + refused.error);
+  EXPECT_STREQ(to_string(VerdictState::kUndetermined), "undetermined");
   o.plain_model_rgb = true;
   EXPECT_EQ(terms(plain, obs), (T{"rgb", "depth", "mask"}));
   // Loaded meshes: vertex colours of one value are plain, two are not.

@@ -48,6 +48,7 @@ void RefinerNodelet::onDiagnostics(diagnostic_updater::DiagnosticStatusWrapper& 
   stat.add("frames skipped (worker busy)", s.frames_skipped);
   stat.add("objects refined", s.objects_refined);
   stat.add("implausible results", s.implausible);
+  stat.add("undetermined results (not refined, or nothing could judge them)", s.undetermined);
   stat.add("detections beyond max_instances (ignored)", s.extra_detections);
   stat.add("refine rate (frames/s)", format_fixed(rate, 2));
   stat.add("last latency (s)", format_fixed(s.last_latency));

@@ -23,9 +23,18 @@ diffdope_ros::RefinedPose refined_pose_msg(const diffdope::RefineResult& r, cons
   p.loss = r.loss.total;
   p.initial_loss = r.initial_loss;
   p.converged = r.converged;
+  p.print_significance = r.print.significance();
   p.plausible = r.plausible;
   p.confidence = r.confidence;
   p.judged = r.judged;
+  switch (diffdope::verdict_state(r)) {
+    case diffdope::VerdictState::kPlausible: p.verdict = diffdope_ros::RefinedPose::PLAUSIBLE; break;
+    case diffdope::VerdictState::kImplausible: p.verdict = diffdope_ros::RefinedPose::IMPLAUSIBLE; break;
+    case diffdope::VerdictState::kUndetermined: p.verdict = diffdope_ros::RefinedPose::UNDETERMINED; break;
+  }
+  p.error = diffdope::undetermined_reason(r);
+  p.terms = diffdope::used_terms(r.loss_used);
+  p.retried = r.retried;
   p.iterations = r.iterations;
   p.time_ms = r.time_ms;
   return p;
@@ -38,29 +47,36 @@ std::vector<diffdope_ros::RefinedPose> RefinerNodelet::publishResults(
     const std::vector<diffdope::RefineResult>& results, std::vector<std::string>* skipped, ros::WallTime start) {
   std::vector<diffdope_ros::RefinedPose> out;
   std::vector<geometry_msgs::TransformStamped> transforms;
-  int implausible = 0;
+  int implausible = 0, undetermined = 0, not_refined = 0;
   for (size_t n = 0; n < results.size(); ++n) {
     const auto [i, k] = target_of[n];
     Slot& s = *slots_[i];
     Instance& in = s.instances[size_t(k)];
     const diffdope::RefineResult& r = results[n];
     const std::vector<diffdope::Seed>& starts = seeds[seeds_of[n]].starts;
-    if (!r.error.empty()) {
+    const diffdope::Pose inv_model = s.config.model_transform.inverse();
+    const auto message = [&](const diffdope::Seed& seed, const diffdope::Pose& pose) {
+      diffdope_ros::RefinedPose p = refined_pose_msg(r, seed, pose, inv_model);
+      p.name = s.config.name;
+      p.instance = k;
+      p.pose.header = frame.header;
+      return p;
+    };
+    undetermined += diffdope::verdict_state(r) == diffdope::VerdictState::kUndetermined;
+    if (!r.error.empty()) {  // in ~refined_poses with its reason, and nowhere else
       errors_.error("refine_" + in.name, "object '" + in.name + "' not refined: " + r.error);
       if (skipped) skipped->push_back(in.name + " (" + r.error + ")");
       if (s.tracks->report(k, starts.front().pose, false, frame.header.stamp.toSec())) reportLostTrack(s, k);
+      out.push_back(message(starts.front(), r.pose));
+      ++not_refined;
       continue;
     }
     const diffdope::Seed& seed = starts[std::min<size_t>(size_t(r.start), starts.size() - 1)];
     // No spin / flip of a symmetric object between frames.
     const diffdope::Pose refined = s.tracks->track(k).reported_pose(r.pose, s.mesh->symmetry);
     if (s.tracks->report(k, refined, r.plausible, frame.header.stamp.toSec())) reportLostTrack(s, k);
-    implausible += !r.plausible;
-    const diffdope::Pose inv_model = s.config.model_transform.inverse();
-    diffdope_ros::RefinedPose p = refined_pose_msg(r, seed, refined, inv_model);
-    p.name = s.config.name;
-    p.instance = k;
-    p.pose.header = frame.header;
+    implausible += diffdope::verdict_state(r) == diffdope::VerdictState::kImplausible;
+    diffdope_ros::RefinedPose p = message(seed, refined);
     out.push_back(p);
     if (!r.plausible && !publish_implausible_) continue;  // scores still go out in ~refined_poses
     in.pose_pub.publish(p.pose);
@@ -95,8 +111,9 @@ std::vector<diffdope_ros::RefinedPose> RefinerNodelet::publishResults(
     if (stats_.frames_refined == 0) stats_.first_refined = now;
     stats_.last_refined = now;
     ++stats_.frames_refined;
-    stats_.objects_refined += long(out.size());
+    stats_.objects_refined += long(out.size()) - not_refined;
     stats_.implausible += implausible;
+    stats_.undetermined += undetermined;
     stats_.last_latency = latency;
     stats_.latency_sum += latency;
     stats_.last_refine_ms = (now - start).toSec() * 1e3;

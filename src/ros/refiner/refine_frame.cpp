@@ -62,10 +62,10 @@ std::vector<diffdope_ros::RefinedPose> RefinerNodelet::refineAndPublish(const Fr
   const ros::WallTime refine_start = ros::WallTime::now();
   std::vector<diffdope::RefineResult> results =
       refiner_->refine_all(frame.camera, frame.observation, targets, options);
-  // With no iteration run (iterations 0) each result is its start, unrefined: the node never calls that
-  // plausible, whatever the start's scores, so it is neither tracked nor put on TF as a refined pose.
+  // An undetermined result (with no iteration run, each is its start, unrefined) is never called plausible,
+  // whatever the start's scores: it is neither tracked nor put on TF as a refined pose.
   for (diffdope::RefineResult& r : results)
-    if (r.iterations == 0) r.plausible = false, r.confidence = 0;
+    if (diffdope::verdict_state(r) == diffdope::VerdictState::kUndetermined) r.plausible = false, r.confidence = 0;
   // The cost per evaluation made (RefineResult::evaluations); estimates use planned_evaluations(), an upper
   // bound, so they err long.
   double evaluations = 0;

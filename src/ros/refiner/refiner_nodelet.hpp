@@ -171,7 +171,8 @@ class RefinerNodelet : public nodelet::Nodelet {
 
   // Statistics (work_mutex_).
   struct Stats {
-    long frames_synced = 0, frames_skipped = 0, frames_refined = 0, objects_refined = 0, implausible = 0;
+    long frames_synced = 0, frames_skipped = 0, frames_refined = 0, objects_refined = 0, implausible = 0,
+         undetermined = 0;
     long extra_detections = 0;  // detections of an object beyond its max_instances
     long requests_succeeded = 0, requests_failed = 0;  // ~refine calls answered (Refine::Response::success)
     double last_latency = -1, latency_sum = 0, last_refine_ms = 0;
