@@ -6,6 +6,8 @@
 #include <map>
 #include <string>
 
+#include <dynamic_reconfigure/Config.h>
+
 #include "diffdope/object_track.hpp"
 #include "diffdope_ros/stream_mode.hpp"
 
@@ -43,8 +45,12 @@ struct RefinerSettings {
   std::string detection_prefix = "/dope/pose_";  // ~detection_topic_prefix
   std::string detections_topic;             // ~detections_topic: DOPE's Detection3DArray ("" = off)
   std::map<std::string, int64_t> class_ids;  // ~class_ids: object name -> DOPE class id
-  /// ~max_detection_age, ~track_timeout, ~max_track_failures, ~predict_motion; tracking follows the mode.
+  /// ~max_detection_age, ~track_timeout, ~max_track_failures, ~predict_motion, ~max_extrapolation,
+  /// ~track_batch_size, ~track_iterations (TrackOptions' defaults); tracking follows the mode.
   diffdope::TrackOptions track;
+  /// The ~parameters of cfg/Refiner.cfg that are set (mode, publish_implausible and the track options above are
+  /// taken from them here; the refiner options override the YAMLs' when the objects are loaded).
+  dynamic_reconfigure::Config runtime_parameters;
   std::string objects_config;               // ~objects_config (required)
   std::string refiner_config;               // ~refiner_config: overrides the objects file's refiner section
   std::string device;                       // ~device ("" = the YAML's choice)
@@ -57,7 +63,8 @@ struct RefinerSettings {
 void check_refiner_settings(RefinerSettings& settings);
 
 /// Reads every ~parameter of `pnh` once and checks them (check_refiner_settings). An unknown ~mode is logged
-/// (as `node_name`) and read as tracking; a malformed ~class_ids goes to `errors`.
+/// (as `node_name`) and read as tracking; a malformed ~class_ids goes to `errors`. A parameter of
+/// cfg/Refiner.cfg of the wrong type (iterations: "many") is a configuration error naming it.
 RefinerSettings load_refiner_settings(const ros::NodeHandle& pnh, const std::string& node_name,
                                       ErrorReporter& errors);
 

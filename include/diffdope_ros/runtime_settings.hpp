@@ -23,6 +23,8 @@ RefinerConfig to_config(const RuntimeSettings& settings);
 /// `base` with the values of `config` (what the config does not hold, e.g. the render options, stays as in
 /// `base`). Throws std::invalid_argument naming the first value the library refuses.
 RuntimeSettings from_config(const RefinerConfig& config, const RuntimeSettings& base);
+/// The same without the options' checks (an unknown mode still throws): for taking some of the values out.
+RuntimeSettings with_config(const RefinerConfig& config, const RuntimeSettings& base);
 
 /// One value that differs between two sets of reconfigure values.
 struct ConfigChange {

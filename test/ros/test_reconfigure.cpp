@@ -112,11 +112,13 @@ bool waitForArrays(ros::WallTime t, size_t n, double timeout) {
 
 TEST(Reconfigure, ChangesTakeEffectAtTheNextFramesAndBadSetsAreReverted) {
   ASSERT_TRUE(ros::service::waitForService(kService, ros::Duration(30))) << kService << " never appeared";
-  // An empty request returns the values in force: the YAML's runs and iterations, the launch file's image scale.
+  // An empty request returns the values in force: the YAML's runs and iterations, the launch file's image scale
+  // and extrapolation.
   const dynamic_reconfigure::Config start = set(dynamic_reconfigure::Config());
   EXPECT_EQ(intValue(start, "iterations"), 40);
   EXPECT_EQ(intValue(start, "batch_size"), 16);
   EXPECT_NEAR(doubleValue(start, "image_scale"), 0.45, 1e-9);
+  EXPECT_NEAR(doubleValue(start, "max_extrapolation"), 1.5, 1e-9);  // a track option, read with the others
   EXPECT_EQ(strValue(start, "mode"), "tracking");
   ASSERT_TRUE(waitForArrays(ros::WallTime(), 3, 60)) << "the refiner never streamed";
   // 40: the detection budget; 20: the tracking budget (~track_iterations) of frames on steady tracks.

@@ -89,7 +89,7 @@ void RefinerNodelet::loadObjects() {
     // checked as the YAML's are.
     const RuntimeSettings launch_values{mode_, refiner_options_, track_options_, publish_implausible_};
     RefinerConfig launch = to_config(launch_values);
-    launch.__fromServer__(pnh);
+    launch.__fromMessage__(settings_.runtime_parameters);  // (read with the other settings)
     launch.mode = to_string(mode_);  // (read with the settings, with its own message)
     const RuntimeSettings settings = from_config(launch, launch_values);
     // Said at start: a value set through dynamic_reconfigure stays on the parameter server, so a restarted node

@@ -8,6 +8,7 @@
 
 #include "base/option_range.hpp"
 #include "diffdope_ros/error_reporter.hpp"
+#include "diffdope_ros/runtime_settings.hpp"
 
 namespace diffdope_ros {
 
@@ -39,15 +40,59 @@ void check_refiner_settings(RefinerSettings& s) {
   }
 }
 
+namespace {
+
+/// The ~parameters named in cfg/Refiner.cfg that are set, each read once with its type; the first of the wrong
+/// type goes to `error` (unless it holds one already).
+dynamic_reconfigure::Config read_runtime_parameters(const ros::NodeHandle& pnh, std::string& error) {
+  dynamic_reconfigure::Config names, out;
+  RefinerConfig::__getDefault__().__toMessage__(names);
+  const auto wrong_type = [&](const std::string& name, const char* type) {
+    if (error.empty()) error = "~" + name + ": expected " + type;
+  };
+  for (auto p : names.ints)
+    if (pnh.hasParam(p.name)) {
+      if (pnh.getParam(p.name, p.value)) out.ints.push_back(p);
+      else wrong_type(p.name, "an integer");
+    }
+  for (auto p : names.doubles)
+    if (pnh.hasParam(p.name)) {
+      if (pnh.getParam(p.name, p.value)) out.doubles.push_back(p);
+      else wrong_type(p.name, "a number");
+    }
+  for (auto p : names.bools) {
+    bool value = false;
+    if (!pnh.hasParam(p.name)) continue;
+    if (pnh.getParam(p.name, value)) p.value = value, out.bools.push_back(p);
+    else wrong_type(p.name, "true or false");
+  }
+  for (auto p : names.strs)
+    if (pnh.hasParam(p.name)) {
+      if (pnh.getParam(p.name, p.value)) out.strs.push_back(p);
+      else wrong_type(p.name, "a string");
+    }
+  return out;
+}
+
+}  // namespace
+
 RefinerSettings load_refiner_settings(const ros::NodeHandle& pnh, const std::string& node_name,
                                       ErrorReporter& errors) {
   RefinerSettings s;
+  s.runtime_parameters = read_runtime_parameters(pnh, s.error);
+  // mode, publish_implausible and the track options: TrackOptions' defaults, then the ~parameters.
+  RefinerConfig runtime = to_config(RuntimeSettings{s.mode, {}, s.track, s.publish_implausible});
+  runtime.__fromMessage__(s.runtime_parameters);
   try {
-    s.mode = parse_stream_mode(pnh.param<std::string>("mode", "tracking"));
+    parse_stream_mode(runtime.mode);
   } catch (const std::invalid_argument& e) {
     ROS_ERROR_STREAM_NAMED(node_name, "~" << e.what() << "; using tracking");
-    s.mode = StreamMode::kTracking;
+    runtime.mode = to_string(StreamMode::kTracking);
   }
+  const RuntimeSettings taken = with_config(runtime, RuntimeSettings());
+  s.mode = taken.mode;
+  s.track = taken.track;  // (track.tracking follows the mode)
+  s.publish_implausible = taken.publish_implausible;
   s.use_depth = pnh.param("use_depth", s.use_depth);
   // ~mask_source, or the older ~use_mask (true: the topic); both, disagreeing, is a configuration error.
   const bool use_mask = pnh.param("use_mask", false);
@@ -82,15 +127,6 @@ RefinerSettings load_refiner_settings(const ros::NodeHandle& pnh, const std::str
     }
   }
   s.publish_tf = pnh.param("publish_tf", s.publish_tf);
-  s.publish_implausible = pnh.param("publish_implausible", s.publish_implausible);
-  // on_request also seeds from its own previous results ("refine again" on a newer frame).
-  s.track.tracking = s.mode != StreamMode::kContinuous;
-  const diffdope::TrackOptions track_defaults;  // one source of the defaults: TrackOptions
-  s.track.max_detection_age = pnh.param("max_detection_age", track_defaults.max_detection_age);
-  s.track.track_timeout = pnh.param("track_timeout", track_defaults.track_timeout);
-  s.track.max_failures = pnh.param("max_track_failures", track_defaults.max_failures);
-  s.track.predict = pnh.param("predict_motion", track_defaults.predict);
-  s.track.max_extrapolation = pnh.param("max_extrapolation", track_defaults.max_extrapolation);
   s.error_throttle = pnh.param("error_throttle", s.error_throttle);
   s.objects_config = pnh.param<std::string>("objects_config", "");
   s.refiner_config = pnh.param<std::string>("refiner_config", "");

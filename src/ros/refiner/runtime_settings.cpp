@@ -65,7 +65,7 @@ RefinerConfig to_config(const RuntimeSettings& settings) {
   return c;
 }
 
-RuntimeSettings from_config(const RefinerConfig& config, const RuntimeSettings& base) {
+RuntimeSettings with_config(const RefinerConfig& config, const RuntimeSettings& base) {
   RuntimeSettings s = base;
   s.mode = parse_stream_mode(config.mode);
   dynamic_reconfigure::Config msg;
@@ -73,6 +73,11 @@ RuntimeSettings from_config(const RefinerConfig& config, const RuntimeSettings& 
   for_each_option(msg, s, [](const auto& row, auto& options, const auto& value) { row.set_number(options, value); });
   s.publish_implausible = config.publish_implausible;
   s.track.tracking = s.mode != StreamMode::kContinuous;  // on_request seeds from its own previous results too
+  return s;
+}
+
+RuntimeSettings from_config(const RefinerConfig& config, const RuntimeSettings& base) {
+  RuntimeSettings s = with_config(config, base);
   s.refiner.validate();  // the same checks as the YAML's
   s.track.validate();
   return s;
