@@ -46,4 +46,9 @@ struct DecodedDetectionArray {
 /// score, or a zero quaternion, is decoded with its `problem` set.
 DecodedDetectionArray decode_detection3d_array(const uint8_t* data, size_t size);
 
+/// The ROS 1 serialization of `array` as DOPE publishes it (what decode_detection3d_array reads back): each
+/// detection with its hypotheses, a bounding box of size `box_size` (metres) at its first hypothesis' pose, and
+/// an empty source cloud. For tools that write DOPE's output into a bag (topic_tools::ShapeShifter).
+std::vector<uint8_t> encode_detection3d_array(const DecodedDetectionArray& array, double box_size = 0.1);
+
 }  // namespace diffdope_ros

@@ -75,6 +75,9 @@ struct Recorder {
 TEST(BagAccuracy, RefinedPosesTfAndScores) {
   ros::NodeHandle nh, pnh("~");
   const bool expect_track = pnh.param("expect_track", true), check_outputs = pnh.param("check_outputs", true);
+  // expect_detection_array: DOPE's Detection3DArray is played too; every detection in it must be read and matched
+  // to an object by its class id.
+  const bool expect_detection_array = pnh.param("expect_detection_array", false);
   const bool has_mask = pnh.param("has_mask", true), has_depth = pnh.param("has_depth", true);
   // each_within false: only require that refinement improves on the detector on average (rgb-only input).
   const bool each_within = pnh.param("each_within", true);
@@ -106,8 +109,8 @@ TEST(BagAccuracy, RefinedPosesTfAndScores) {
   if (check_outputs) {  // subscribing is what turns the overlay and markers on
     overlay_sub = nh.subscribe("/diffdope_refiner/overlay", 2, &Recorder::onOverlay, &rec);
     markers_sub = nh.subscribe("/diffdope_refiner/markers", 2, &Recorder::onMarkers, &rec);
-    diag_sub = nh.subscribe("/diagnostics", 10, &Recorder::onDiagnostics, &rec);
   }
+  if (check_outputs || expect_detection_array) diag_sub = nh.subscribe("/diagnostics", 10, &Recorder::onDiagnostics, &rec);
   ros::AsyncSpinner spinner(2);
   spinner.start();
 
@@ -282,6 +285,18 @@ TEST(BagAccuracy, RefinedPosesTfAndScores) {
     }
     EXPECT_TRUE(ok_with_refined) << "no OK diagnostics reporting refined frames (" << rec.diagnostics.size()
                                  << " statuses)";
+  }
+  if (expect_detection_array) {
+    std::string counts;
+    for (const auto& d : rec.diagnostics)
+      for (const auto& kv : d.values)
+        if (kv.key == "input detections (Detection3DArray)") counts = kv.value;
+    ASSERT_FALSE(counts.empty()) << "no Detection3DArray counts in the diagnostics";
+    EXPECT_EQ(counts.find("received 0 "), std::string::npos) << counts;
+    EXPECT_NE(counts.find("(malformed 0)"), std::string::npos) << counts;
+    EXPECT_EQ(counts.find("of a known class 0,"), std::string::npos) << counts;
+    EXPECT_NE(counts.find("of an unknown class id 0, unusable 0"), std::string::npos) << counts;
+    std::printf("DOPE's Detection3DArray: %s\n", counts.c_str());
   }
   const double span = rec.arrays.size() > 1 ? (rec.arrays.back().header.stamp - rec.arrays.front().header.stamp).toSec() : 0;
   std::printf("%d object poses seeded by tracking\n", from_track);

@@ -122,4 +122,55 @@ DecodedDetectionArray decode_detection3d_array(const uint8_t* data, size_t size)
   return out;
 }
 
+namespace {
+
+/// Little-endian writes, field by field as the .msg files define them.
+struct Writer {
+  std::vector<uint8_t> bytes;
+  template <class T>
+  void put(T v) {
+    const size_t at = bytes.size();
+    bytes.resize(at + sizeof(T));
+    std::memcpy(bytes.data() + at, &v, sizeof(T));
+  }
+  void string(const std::string& s) {
+    put<uint32_t>(uint32_t(s.size()));
+    bytes.insert(bytes.end(), s.begin(), s.end());
+  }
+  void header(const std::string& frame, uint32_t sec, uint32_t nsec) {
+    put<uint32_t>(0), put<uint32_t>(sec), put<uint32_t>(nsec), string(frame);
+  }
+  void pose(const diffdope::Pose& p) {
+    const auto q = p.quaternion_xyzw();
+    for (double v : {p.t.x(), p.t.y(), p.t.z(), q[0], q[1], q[2], q[3]}) put<double>(v);
+  }
+};
+
+}  // namespace
+
+std::vector<uint8_t> encode_detection3d_array(const DecodedDetectionArray& array, double box_size) {
+  Writer w;
+  w.header(array.frame_id, array.stamp_sec, array.stamp_nsec);
+  w.put<uint32_t>(uint32_t(array.detections.size()));
+  for (const DecodedDetection& d : array.detections) {
+    w.header(d.frame_id, d.stamp_sec, d.stamp_nsec);
+    w.put<uint32_t>(uint32_t(d.results.size()));
+    for (const DecodedHypothesis& h : d.results) {
+      w.put<int64_t>(h.class_id);
+      w.put<double>(h.score);
+      w.pose(h.pose);
+      for (double c : h.covariance) w.put<double>(c);
+    }
+    w.pose(d.results.empty() ? diffdope::Pose() : d.results.front().pose);  // bbox.center
+    for (int k = 0; k < 3; ++k) w.put<double>(box_size);                    // bbox.size
+    w.header(d.frame_id, d.stamp_sec, d.stamp_nsec);                         // source_cloud: empty
+    w.put<uint32_t>(0), w.put<uint32_t>(0);                                  // height, width
+    w.put<uint32_t>(0);                                                      // fields
+    w.put<uint8_t>(0), w.put<uint32_t>(0), w.put<uint32_t>(0);               // is_bigendian, point_step, row_step
+    w.put<uint32_t>(0);                                                      // data
+    w.put<uint8_t>(1);                                                       // is_dense
+  }
+  return w.bytes;
+}
+
 }  // namespace diffdope_ros

@@ -3,9 +3,10 @@
 //
 //   diffdope_make_bag --out DIR [--frames N] [--rate HZ] [--detector-every K] [--detector-latency S]
 //                     [--objects 1|2|3|can|twins] [--seed S] [--width W] [--height H] [--depth-encoding 16UC1|32FC1]
-//                     [--rot-noise-deg D] [--trans-noise-m M] [--compression none|lz4|bz2]
+//                     [--rot-noise-deg D] [--trans-noise-m M] [--compression none|lz4|bz2] [--dope TOPIC]
 //
-// DIR/demo.bag, DIR/meshes/<name>.ply (+ <name>.png texture; metres), DIR/objects.yaml (object_config.hpp).
+// DIR/demo.bag, DIR/meshes/<name>.ply (+ <name>.png texture; metres), DIR/objects.yaml (object_config.hpp);
+// with --dope also DIR/config_pose.yaml, the same objects in DOPE's own layout (class ids 1, 2, 3 in order).
 // Objects: a scan-like bottle alone (--objects 1), or a low-poly printed box, the bottle and a scan-like mug (labels
 // 1, 2, 3 in the mask; scan-like: 15k triangles, UV atlas, 2048^2 print), or a striped can alone (--objects can:
 // symmetric about its axis, declared so in objects.yaml, its detections turned at random about it), or two
@@ -23,6 +24,8 @@
 //   /dope/pose_<name>              geometry_msgs/PoseStamped in camera_link, every K-th frame, stamped t_k and
 //                                  written at t_k + detector latency (perturbed by the paper's rule)
 //   /diffdope_refiner/initial_poses  (twins) diffdope_ros/InitialPoseArray: both boxes' detections, as above
+//   TOPIC (--dope)                 vision_msgs/Detection3DArray as DOPE publishes it: the same detections, one
+//                                  Detection3D each with its class id and a score, in camera_link
 //   /tf_static                     tf2_msgs/TFMessage camera_link -> camera_color_optical_frame (latched)
 #include <cv_bridge/cv_bridge.h>
 #include <diffdope_ros/InitialPoseArray.h>
@@ -33,6 +36,7 @@
 #include <sensor_msgs/Image.h>
 #include <sensor_msgs/image_encodings.h>
 #include <tf2_msgs/TFMessage.h>
+#include <topic_tools/shape_shifter.h>
 
 #include <algorithm>
 #include <cmath>
@@ -40,6 +44,7 @@
 #include <cstdlib>
 #include <deque>
 #include <filesystem>
+#include <functional>
 #include <fstream>
 #include <iostream>
 #include <limits>
@@ -51,6 +56,7 @@
 #include <vector>
 
 #include "diffdope_ros/conversions.hpp"
+#include "diffdope_ros/detection3d_array.hpp"
 #include "diffdope/input_files.hpp"
 #include "diffdope/object_config.hpp"
 #include "diffdope/procedural.hpp"
@@ -82,6 +88,7 @@ struct Args {
   double rot_noise_deg = 5.0;
   double trans_noise_m = 0.01;
   std::string compression = "lz4";
+  std::string dope_topic;  // --dope: also DOPE's Detection3DArray on this topic, and DIR/config_pose.yaml
 };
 
 void usage(std::ostream& os) {
@@ -90,6 +97,7 @@ void usage(std::ostream& os) {
         "         [--height H (480)] [--depth-encoding 16UC1|32FC1 (16UC1)] [--rot-noise-deg D (5)]\n"
         "         [--trans-noise-m M (0.01)] [--compression none|lz4|bz2 (lz4)]\n"
         "         [--detector-frames N (all): the detector goes silent from frame N on (tracking)]\n"
+        "         [--dope TOPIC: also DOPE's Detection3DArray on TOPIC, and DIR/config_pose.yaml]\n"
         "Writes DIR/demo.bag, DIR/meshes/<name>.ply and DIR/objects.yaml (see the header of make_demo_bag.cpp).\n";
 }
 
@@ -132,6 +140,7 @@ Args parse_args(int argc, char** argv) {
     if (i + 1 >= argc) throw UsageError(opt + ": missing value");
     const std::string v = argv[++i];
     if (opt == "--out") a.out = v;
+    else if (opt == "--dope") a.dope_topic = v;
     else if (opt == "--frames") a.frames = int(parse_int(opt, v, 1, 100000));
     else if (opt == "--rate") a.rate = parse_double(opt, v, 0.0, 1000.0, false);
     else if (opt == "--detector-every") a.detector_every = int(parse_int(opt, v, 1, 100000));
@@ -261,6 +270,32 @@ int main(int argc, char** argv) {
         throw std::runtime_error(cfg.objects.at(config_index[i]).mesh_path + ": mesh reads back at a different size");
     }
 
+    if (!args.dope_topic.empty()) {  // DOPE's layout: its own keys too, which the refiner leaves to DOPE
+      std::ostringstream dope;
+      dope << "# Written by diffdope_make_bag --dope: the objects of demo.bag in DOPE's config_pose.yaml layout.\n"
+           << "topic_camera: \"/camera/color/image_raw\"\ntopic_camera_info: \"/camera/color/camera_info\"\n"
+           << "topic_publishing: \"dope\"\ninput_is_rectified: True\ndownscale_height: 400\n";
+      const auto map = [&](const char* key, const std::function<std::string(const ObjectConfig&, size_t)>& value) {
+        dope << key << ": {";
+        for (size_t k = 0; k < cfg.objects.size(); ++k)
+          dope << (k ? ", " : "") << cfg.objects[k].name << ": " << value(cfg.objects[k], k);
+        dope << "}\n";
+      };
+      map("weights", [](const ObjectConfig& o, size_t) { return "\"package://dope/weights/" + o.name + ".pth\""; });
+      map("model_transforms", [](const ObjectConfig&, size_t) { return "[[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]"; });
+      map("meshes", [](const ObjectConfig& o, size_t) { return "\"file://" + o.mesh_path + "\""; });
+      map("mesh_scales", [](const ObjectConfig&, size_t) { return std::string("1.0"); });
+      map("class_ids", [](const ObjectConfig&, size_t k) { return std::to_string(k + 1); });
+      dope << "thresh_angle: 0.5\nthresh_map: 0.01\nsigma: 3\nthresh_points: 0.1\n";
+      const std::string dope_path = (out_dir / "config_pose.yaml").string();
+      std::ofstream f(dope_path);
+      f << dope.str();
+      if (!f) throw std::runtime_error(dope_path + ": cannot write");
+      f.close();
+      if (load_objects_config(dope_path).objects.size() != cfg.objects.size())
+        throw std::logic_error(dope_path + ": reads back with another number of objects");
+    }
+
     // Camera and scene layout.
     const Camera cam = demo_camera(args.width, args.height);
     auto renderer = make_cpu_renderer();
@@ -303,6 +338,7 @@ int main(int argc, char** argv) {
     };
     std::deque<Pending> pending;  // detections waiting for their arrival time (constant latency: FIFO)
     std::deque<std::pair<ros::Time, diffdope_ros::InitialPoseArray>> pending_arrays;  // (twins)
+    std::deque<std::pair<ros::Time, diffdope_ros::DecodedDetectionArray>> pending_dope;  // (--dope)
     auto flush = [&](const ros::Time* until) {
       while (!pending.empty() && (!until || pending.front().write_time <= *until)) {
         bag.write(pending.front().topic, pending.front().write_time, pending.front().msg);
@@ -311,6 +347,15 @@ int main(int argc, char** argv) {
       while (!pending_arrays.empty() && (!until || pending_arrays.front().first <= *until)) {
         bag.write("/diffdope_refiner/initial_poses", pending_arrays.front().first, pending_arrays.front().second);
         pending_arrays.pop_front();
+      }
+      while (!pending_dope.empty() && (!until || pending_dope.front().first <= *until)) {
+        std::vector<uint8_t> bytes = diffdope_ros::encode_detection3d_array(pending_dope.front().second);
+        topic_tools::ShapeShifter m;
+        m.morph(diffdope_ros::kDetection3DArrayMd5, diffdope_ros::kDetection3DArrayType, "", "");
+        ros::serialization::IStream in(bytes.data(), uint32_t(bytes.size()));
+        m.read(in);
+        bag.write(args.dope_topic, pending_dope.front().first, m);
+        pending_dope.pop_front();
       }
     };
 
@@ -378,6 +423,23 @@ int main(int argc, char** argv) {
           d.msg.header = header(t, kLinkFrame, uint32_t(k / args.detector_every));
           d.msg.pose = diffdope_ros::pose_to_msg(T_link_optical * noisy);
           ++detections;
+          if (!args.dope_topic.empty()) {  // the same detection in DOPE's array, with its class id
+            if (pending_dope.empty() || pending_dope.back().first != d.write_time) {
+              diffdope_ros::DecodedDetectionArray a;
+              a.frame_id = kLinkFrame;
+              a.stamp_sec = t.sec, a.stamp_nsec = t.nsec;
+              pending_dope.emplace_back(d.write_time, a);
+            }
+            diffdope_ros::DecodedDetection det;
+            det.frame_id = kLinkFrame;
+            det.stamp_sec = t.sec, det.stamp_nsec = t.nsec;
+            diffdope_ros::DecodedHypothesis h;
+            h.class_id = int64_t(config_index[i]) + 1;
+            h.score = 0.9;
+            h.pose = T_link_optical * noisy;
+            det.results.push_back(h);
+            pending_dope.back().second.detections.push_back(det);
+          }
           if (!args.twins) {
             pending.push_back(d);
             continue;
