@@ -130,7 +130,10 @@ void RefinerNodelet::loadObjects() {
       slot->tracks = std::make_unique<diffdope::InstanceTracks>(
           slot->config.max_instances, track_options_, slot->mesh->center().cast<double>(), slot->mesh->diameter());
       NODELET_INFO_STREAM("object '" << slot->config.name << "': " << slot->mesh->num_triangles() << " triangles, "
-                                     << "diameter " << format_fixed(slot->mesh->diameter()) << " m"
+                                     << "diameter " << format_fixed(slot->mesh->diameter()) << " m, box centre ("
+                                     << format_fixed(slot->mesh->center().x()) << ", "
+                                     << format_fixed(slot->mesh->center().y()) << ", "
+                                     << format_fixed(slot->mesh->center().z()) << ") m in the mesh's frame"
                                      << (slot->config.max_instances > 1
                                              ? ", up to " + std::to_string(slot->config.max_instances) + " instances"
                                              : std::string()));
