@@ -155,9 +155,9 @@ int main(int argc, char** argv) {
         t.mesh = &objects[i].mesh;
         t.initial = starts.front().pose;
         for (size_t j = 1; j < starts.size(); ++j) t.alternatives.push_back(starts[j].pose);
-        t.explore = explores(starts);
+        t.start_kind = start_kind(starts);
         if (args.masks) t.mask = scene.visible_masks[i];
-        all_steady = all_steady && !t.explore && tracks[i].steady(stamp);
+        all_steady = all_steady && t.start_kind == StartKind::kTracked && tracks[i].steady(stamp);
         targets.push_back(t);
         target_object.push_back(i);
         target_starts.push_back(starts);

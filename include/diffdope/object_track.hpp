@@ -41,12 +41,11 @@ struct Seed {
   double stamp = 0;  // the detection's / refined frame's stamp
 };
 
-/// Whether a refinement from `starts` (ObjectTrack::seeds_for(), best first) explores (ObjectTarget::explore: the
-/// shape scan and the retry of a rejected result) on the refiner's full budget: from a caller's pose, or from a
-/// detection when no live track is among the starts. A live track is right or nearly so (the verdict accepted
-/// it); a fresh detection then is one more start and the loss decides, while a scan could only flip a right
-/// track between frames on a weakly printed object.
-bool explores(const std::vector<Seed>& starts);
+/// The kind of a refinement from `starts` (ObjectTrack::seeds_for(), best first; ObjectTarget::start_kind).
+/// kFresh, the full refinement: from a caller's pose, or from a detection when no live track is among the starts.
+/// kTracked otherwise: a live track is right or nearly so (the verdict accepted it), and a fresh detection beside
+/// it is one more start for the loss to weigh.
+StartKind start_kind(const std::vector<Seed>& starts);
 
 /// A detector's box for a refinement from `starts` (ObjectTarget::box): the object's box projected at the first
 /// detection among them (DOPE's projected cuboid: its keypoints are the detector's 2D evidence), within the
@@ -58,7 +57,7 @@ cv::Rect detector_box(const Camera& camera, const Mesh& mesh, const std::vector<
 /// or two rounds; the cap bounds the frame's time.
 constexpr int kTrackedNewtonRounds = 4;
 
-/// The refiner options for a frame whose targets all start from steady tracks (none explores(), each
+/// The refiner options for a frame whose targets all start from steady tracks (each start_kind() kTracked and
 /// ObjectTrack::steady()): `o` with its batch_size and iterations capped at TrackOptions' (where those are set),
 /// no polish, and at most kTrackedNewtonRounds Newton rounds.
 RefinerOptions tracked_options(const RefinerOptions& o, const TrackOptions& t);

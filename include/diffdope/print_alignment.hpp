@@ -20,7 +20,7 @@ namespace diffdope {
 /// working resolution. A range below kPrintCoarseStep searches nothing.
 constexpr double kPrintCoarseStep = 2.5 * M_PI / 180.0;
 constexpr double kPrintFineStep = 0.5 * M_PI / 180.0;
-/// Range about a tracked start (ObjectTarget::explore false): the track was aligned on an earlier frame, so only
+/// Range about a tracked start (ObjectTarget::start_kind kTracked): the track was aligned on an earlier frame, so only
 /// the spin since then is sought. 10 degrees cover 100 deg/s at 10 refined frames/s, with 17 evaluations per
 /// axis instead of 41 at the default 0.7 rad (a third of a tracked refinement's time at 8 x 20).
 constexpr double kTrackedPrintSearch = 10.0 * M_PI / 180.0;

@@ -77,15 +77,16 @@ struct RefinerOptions {
   /// +-retry_turn about the surface's three principal axes (through its centroid; turns about a declared
   /// symmetry left out), the B runs shared out among these starts; the retry's result replaces the first only
   /// when the verdict accepts it and its loss is lower (RefineResult::retried). A hard start that descent took
-  /// into a wrong basin (a box seen edge-on) mostly has a turned start in the right one. Costs a second refinement, for rejected results only; never for tracked
-  /// starts (ObjectTarget::explore false) or refine_views(). Radians; 0 = off (the paper's algorithm).
+  /// into a wrong basin (a box seen edge-on) mostly has a turned start in the right one. Costs a second
+  /// refinement, for rejected results only; never for tracked starts (ObjectTarget::start_kind kTracked) or
+  /// refine_views(). Radians; 0 = off (the paper's algorithm).
   double retry_turn = 0.52;  // [0, pi]
   /// Polish: after the descent and the shape scan's choice, before the print alignment, polish_runs runs go on
   /// from the chosen pose for polish_iterations more steps at image_scale, at small rates (lr_low, doubling
   /// per run, decayed as the descent's), and the lowest loss seen is kept. The descent's winners from hard
   /// starts are mostly large-rate runs still hopping 1-3 mm about the minimum when the iterations end
-  /// (docs/benchmarks.md). 0 = off (the paper's algorithm); never for tracked starts (ObjectTarget::explore false) nor with
-  /// iterations 0 (scoring the start).
+  /// (docs/benchmarks.md). 0 = off (the paper's algorithm); never for tracked starts (ObjectTarget::start_kind
+  /// kTracked) nor with iterations 0 (scoring the start).
   int polish_iterations = 30;  // [0, kMaxIterations]
   int polish_runs = 4;         // [1, 16]
   /// Newton steps: after the polish and the print alignment, each of up to newton_rounds rounds probes the
@@ -273,16 +274,19 @@ std::string undetermined_reason(const RefineResult& r);
 /// degrees can end a fraction of a percent lower.
 bool retry_replaces(const RefineResult& first, const RefineResult& retry, bool weigh_print);
 
+/// Where an object's starts come from. kFresh: a detection, or a caller's pose: the full refinement. kTracked: a
+/// live track (its last refined pose and its prediction): no shape scan (explore_tolerance), retry (retry_turn)
+/// nor polish, and the print alignment searches only +-kTrackedPrintSearch (print_alignment.hpp). A live track is
+/// right or nearly so; a scan could only flip it between frames on a weakly printed object.
+enum class StartKind { kFresh, kTracked };
+
 /// One object of a frame for Refiner::refine_all().
 struct ObjectTarget {
   const Mesh* mesh = nullptr;
   Pose initial;
   cv::Mat mask;  // this object's visible mask (CV_32FC1, or any type to_mask_float takes); may be empty
   std::vector<Pose> alternatives;  // further initial poses; the runs are shared out among all of them
-  /// false (a tracked start, explores() in object_track.hpp): no shape scan (explore_tolerance), retry
-  /// (retry_turn) nor polish, and the print alignment searches only +-kTrackedPrintSearch
-  /// (print_alignment.hpp).
-  bool explore = true;
+  StartKind start_kind = StartKind::kFresh;  // (start_kind() in object_track.hpp gives a track's)
   cv::Rect box;  // without a mask: a detector's 2D box around it (Observation::box); may be empty
 };
 
@@ -366,7 +370,7 @@ class Refiner {
   /// `o`, validated and checked against the renderer's device and render options.
   const RefinerOptions& checked(const RefinerOptions& o) const;
   /// The model-frame turns the shape scan tries for `mesh` (none when not exploring).
-  std::vector<Pose> shape_turns(const RefinerOptions& o, const Mesh& mesh, bool explore);
+  std::vector<Pose> shape_turns(const RefinerOptions& o, const Mesh& mesh, StartKind kind);
   /// The axes the print alignment turns `mesh` about (RefinerOptions::print_search; none when it is off).
   std::vector<ShapeRotation> print_axes(const RefinerOptions& o, const Mesh& mesh);
   /// Whether the model-frame `turn` is one of the mesh's declared symmetries.

@@ -13,14 +13,17 @@ class ErrorReporter {
   /// as "other", so a caller that puts values in a category cannot grow the diagnostics or bypass the throttle.
   static constexpr size_t kMaxCategories = 32;
 
+  /// kEveryTime: the answer to one deliberate request (a refused reconfigure), logged whatever the throttle.
+  enum class Logging { kThrottled, kEveryTime };
+
   explicit ErrorReporter(double throttle_period_s = 5.0) : period_(throttle_period_s) {}
   void set_throttle_period(double seconds) { period_ = seconds; }
 
-  /// Logs `message` with ROS_ERROR unless this category was logged less than the throttle period ago, or always
-  /// when `throttled` is false (the answer to one deliberate request, such as a refused reconfigure).
-  void error(const std::string& category, const std::string& message, bool throttled = true);
+  /// Logs `message` with ROS_ERROR unless this category was logged less than the throttle period ago (always
+  /// with Logging::kEveryTime).
+  void error(const std::string& category, const std::string& message, Logging logging = Logging::kThrottled);
   /// The same at WARN level; warnings are counted but do not become last_error.
-  void warn(const std::string& category, const std::string& message, bool throttled = true);
+  void warn(const std::string& category, const std::string& message, Logging logging = Logging::kThrottled);
 
   struct Summary {
     std::string last_error;

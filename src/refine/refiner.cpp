@@ -167,7 +167,7 @@ RefineResult Refiner::refine(const Camera& camera, const Observation& observed, 
 
 RefineResult Refiner::refine_once(const RefinerOptions& o, const Camera& camera, const Observation& observed,
                                   const Mesh& mesh, const std::vector<Pose>& initials) {
-  RefineRun run(o, camera, observed, mesh, initials, shape_turns(o, mesh, true));
+  RefineRun run(o, camera, observed, mesh, initials, shape_turns(o, mesh, StartKind::kFresh));
   run.set_print_axes(print_axes(o, mesh), o.print_search);
   run.set_polish(o.polish_iterations);
   run.set_newton(o.newton_rounds);
@@ -237,8 +237,8 @@ bool Refiner::is_declared_turn(const RefinerOptions& o, const Mesh& mesh, const 
   return mesh.symmetry.contains(turn, angle_tol, o.explore_tolerance * mesh.diameter(), radius);
 }
 
-std::vector<Pose> Refiner::shape_turns(const RefinerOptions& o, const Mesh& mesh, bool explore) {
-  if (!explore || !(o.explore_tolerance > 0) || mesh.content_id() == 0) return {};
+std::vector<Pose> Refiner::shape_turns(const RefinerOptions& o, const Mesh& mesh, StartKind kind) {
+  if (kind != StartKind::kFresh || !(o.explore_tolerance > 0) || mesh.content_id() == 0) return {};
   std::vector<Pose> turns;
   // A declared symmetry's turns look the same by design: no loss can choose among them.
   for (const ShapeRotation& r : ambiguous_rotations(shape_rotations(mesh), o.explore_tolerance, kMaxShapeTurns))
@@ -291,7 +291,7 @@ std::vector<RefineResult> Refiner::refine_all(const Camera& camera, const Observ
   std::vector<ObjectTarget> again;
   std::vector<size_t> which;
   for (size_t k = 0; k < objects.size(); ++k) {
-    if (!objects[k].explore || !objects[k].mesh || !wants_retry(o, out[k])) continue;
+    if (objects[k].start_kind != StartKind::kFresh || !objects[k].mesh || !wants_retry(o, out[k])) continue;
     ObjectTarget t = objects[k];
     const std::vector<Pose> starts = retry_starts(o, *t.mesh, starts_of(t));
     t.alternatives.assign(starts.begin() + 1, starts.end());
@@ -331,12 +331,13 @@ std::vector<RefineResult> Refiner::refine_all_once(const RefinerOptions& options
       const Observation o =
           frame.with_mask(t.mask.empty() || t.mask.type() == CV_32FC1 ? t.mask : to_mask_float(t.mask), t.box);
       runs[k] = std::make_unique<RefineRun>(options, camera, o, *t.mesh, starts_of(t),
-                                            shape_turns(options, *t.mesh, t.explore),
+                                            shape_turns(options, *t.mesh, t.start_kind),
                                             shared_frame ? &*shared_frame : nullptr,
                                             coarse_frame ? &*coarse_frame : nullptr);
-      runs[k]->set_print_axes(print_axes(options, *t.mesh), t.explore ? options.print_search
-                                                                      : std::min(options.print_search, kTrackedPrintSearch));
-      runs[k]->set_polish(t.explore ? options.polish_iterations : 0);
+      const bool fresh = t.start_kind == StartKind::kFresh;
+      runs[k]->set_print_axes(print_axes(options, *t.mesh), fresh ? options.print_search
+                                                                  : std::min(options.print_search, kTrackedPrintSearch));
+      runs[k]->set_polish(fresh ? options.polish_iterations : 0);
       runs[k]->set_newton(options.newton_rounds);
     } catch (const std::exception& e) {
       fail(k, e.what());

@@ -133,12 +133,12 @@ void ObjectTrack::reset() {
   failures_ = 0;
 }
 
-bool explores(const std::vector<Seed>& starts) {
-  if (starts.empty()) return false;
-  if (starts.front().source == SeedSource::kRequest) return true;
+StartKind start_kind(const std::vector<Seed>& starts) {
+  if (starts.empty()) return StartKind::kTracked;
+  if (starts.front().source == SeedSource::kRequest) return StartKind::kFresh;
   for (const Seed& s : starts)
-    if (s.source == SeedSource::kTrack || s.source == SeedSource::kPrediction) return false;
-  return starts.front().source == SeedSource::kDetector;
+    if (s.source == SeedSource::kTrack || s.source == SeedSource::kPrediction) return StartKind::kTracked;
+  return starts.front().source == SeedSource::kDetector ? StartKind::kFresh : StartKind::kTracked;
 }
 
 cv::Rect detector_box(const Camera& camera, const Mesh& mesh, const std::vector<Seed>& starts) {

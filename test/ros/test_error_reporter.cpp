@@ -64,8 +64,8 @@ TEST(ErrorReporter, AnInputErrorIsCategorisedByItsInputNotItsText) {
 
 TEST(ErrorReporter, AnUnthrottledErrorIsCountedAndKeptAsEver) {
   diffdope_ros::ErrorReporter r(60.0);
-  r.error("reconfigure", "reconfigure refused: iterations", false);
-  r.error("reconfigure", "reconfigure refused: batch_size", false);
+  r.error("reconfigure", "reconfigure refused: iterations", diffdope_ros::ErrorReporter::Logging::kEveryTime);
+  r.error("reconfigure", "reconfigure refused: batch_size", diffdope_ros::ErrorReporter::Logging::kEveryTime);
   const auto s = r.summary();
   EXPECT_EQ(s.error_counts.at("reconfigure"), 2);
   EXPECT_EQ(s.last_error, "reconfigure refused: batch_size");

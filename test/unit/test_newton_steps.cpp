@@ -178,7 +178,7 @@ TEST(NewtonSteps, ConvergeTrackedStartsToo) {
     ObjectTarget target;
     target.mesh = &s.mesh;
     target.initial = perturb_pose(s.truth, s.mesh.center(), 3 * M_PI / 180, 0.002, rng);
-    target.explore = false;
+    target.start_kind = StartKind::kTracked;
     const RefineResult n = refiner.refine_all(s.cam, s.obs, {target}, tracked).front();
     const RefineResult p = refiner.refine_all(s.cam, s.obs, {target}, plain).front();
     EXPECT_EQ(p.newton_steps, 0);

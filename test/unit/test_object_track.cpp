@@ -376,13 +376,13 @@ TEST(ObjectTrack, ASymmetricObjectIsReportedWithoutSpinOrFlip) {
 TEST(ObjectTrack, OnlyACallersPoseOrADetectionWithoutALiveTrackExplores) {
   const Seed detection{at(0), SeedSource::kDetector, 1.0}, track{at(0.01), SeedSource::kTrack, 0.9},
       prediction{at(0.02), SeedSource::kPrediction, 0.9}, request{at(0), SeedSource::kRequest, 1.0};
-  EXPECT_FALSE(explores({}));
-  EXPECT_TRUE(explores({detection}));
-  EXPECT_TRUE(explores({request}));
-  EXPECT_TRUE(explores({request, track}));  // a caller asked: the full refinement
-  EXPECT_FALSE(explores({detection, track, prediction}));  // the detection is one more start of a live track
-  EXPECT_FALSE(explores({track}));
-  EXPECT_FALSE(explores({track, prediction}));
+  EXPECT_EQ(start_kind({}), StartKind::kTracked);
+  EXPECT_EQ(start_kind({detection}), StartKind::kFresh);
+  EXPECT_EQ(start_kind({request}), StartKind::kFresh);
+  EXPECT_EQ(start_kind({request, track}), StartKind::kFresh);  // a caller asked: the full refinement
+  EXPECT_EQ(start_kind({detection, track, prediction}), StartKind::kTracked);  // one more start of a live track
+  EXPECT_EQ(start_kind({track}), StartKind::kTracked);
+  EXPECT_EQ(start_kind({track, prediction}), StartKind::kTracked);
 }
 
 TEST(ObjectTrack, LiveTracksGetTheTrackingBudget) {

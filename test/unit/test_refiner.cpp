@@ -138,7 +138,7 @@ TEST(Refiner, SuccessiveHalvingDropsTheWorseHalfThreeTimes) {
   // same when refine_all() evaluates the runs in its joint calls.
   EXPECT_GE(r.evaluations, evaluated(r));
   EXPECT_LE(r.evaluations, planned_evaluations(o));
-  const ObjectTarget target{&s.mesh, init, s.obs.mask, {}, true};
+  const ObjectTarget target{&s.mesh, init, s.obs.mask, {}, StartKind::kFresh};
   EXPECT_EQ(Refiner(o).refine_all(s.cam, s.obs, {target})[0].evaluations, r.evaluations);
   o.successive_halving = false;
   const RefineResult all = Refiner(o).refine(s.cam, s.obs, s.mesh, init);
@@ -511,12 +511,12 @@ TEST(Refiner, ARejectedResultIsRefinedAgainFromTurnedStarts) {
     EXPECT_LT(b.loss.total, a.loss.total);
     EXPECT_EQ(b.initial_loss, a.initial_loss);  // the caller's start, not a turned one
     EXPECT_GT(b.start, 0);                      // the winner came from a turned start
-    // refine_all retries the same way, unless the start is a tracked one (no exploring).
-    ObjectTarget t{&s.mesh, init, s.obs.mask, {}, true};
+    // refine_all retries the same way, unless the start is a tracked one.
+    ObjectTarget t{&s.mesh, init, s.obs.mask, {}, StartKind::kFresh};
     const RefineResult c = retrying.refine_all(s.cam, s.obs, {t})[0];
     EXPECT_TRUE(c.retried);
     EXPECT_LT(add_mm(s, c.pose), 5.0);
-    t.explore = false;
+    t.start_kind = StartKind::kTracked;
     EXPECT_FALSE(retrying.refine_all(s.cam, s.obs, {t})[0].retried);
   }
   // An accepted result is not refined again: the same as without retries.

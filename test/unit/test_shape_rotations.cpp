@@ -302,17 +302,17 @@ TEST(Refiner, AboutATrackedStartThePrintIsSoughtOnlyNearby) {
   o.image_scale = 1.0;
   o.loss.weight_rgb = 0;
   Refiner refiner(o);
-  const auto refined = [&](double degrees_off, bool explore) {
-    ObjectTarget t{&s.can, s.truth * test::about_can_axis(degrees_off), s.obs.mask, {}, explore};
+  const auto refined = [&](double degrees_off, StartKind kind) {
+    ObjectTarget t{&s.can, s.truth * test::about_can_axis(degrees_off), s.obs.mask, {}, kind};
     return refiner.refine_all(s.cam, s.obs, {t})[0];
   };
-  const RefineResult near_track = refined(6, false);
+  const RefineResult near_track = refined(6, StartKind::kTracked);
   EXPECT_LT(angle_between(near_track.pose.R, s.truth.R), 1.0);
   EXPECT_NEAR(degrees(std::abs(near_track.print_turn)), 6.0, 1.0);
-  const RefineResult far_track = refined(20, false);
+  const RefineResult far_track = refined(20, StartKind::kTracked);
   EXPECT_LE(degrees(std::abs(far_track.print_turn)), degrees(kTrackedPrintSearch) + 1e-6);
   EXPECT_GT(angle_between(far_track.pose.R, s.truth.R), 8.0);
-  const RefineResult far_detection = refined(20, true);
+  const RefineResult far_detection = refined(20, StartKind::kFresh);
   EXPECT_LT(angle_between(far_detection.pose.R, s.truth.R), 1.0);
 }
 

@@ -21,7 +21,7 @@ const std::string& bounded(const std::map<std::string, long>& counts, const std:
 
 }  // namespace
 
-void ErrorReporter::error(const std::string& given_category, const std::string& message, bool throttled) {
+void ErrorReporter::error(const std::string& given_category, const std::string& message, Logging logging) {
   const double now = ros::WallTime::now().toSec();
   bool log;
   long count;
@@ -32,7 +32,7 @@ void ErrorReporter::error(const std::string& given_category, const std::string& 
     count = ++summary_.error_counts[category];
     summary_.last_error = message;
     summary_.last_error_time = now;
-    log = should_log("E" + category, now) || !throttled;
+    log = should_log("E" + category, now) || logging == Logging::kEveryTime;
   }
   if (log) {
     if (count > 1) ROS_ERROR_STREAM_NAMED("diffdope", message << " [" << category << " error #" << count << "]");
@@ -40,14 +40,14 @@ void ErrorReporter::error(const std::string& given_category, const std::string& 
   }
 }
 
-void ErrorReporter::warn(const std::string& given_category, const std::string& message, bool throttled) {
+void ErrorReporter::warn(const std::string& given_category, const std::string& message, Logging logging) {
   const double now = ros::WallTime::now().toSec();
   bool log;
   {
     std::lock_guard<std::mutex> lock(mutex_);
     const std::string& category = bounded(summary_.warn_counts, given_category);
     ++summary_.warn_counts[category];
-    log = should_log("W" + category, now) || !throttled;
+    log = should_log("W" + category, now) || logging == Logging::kEveryTime;
   }
   if (log) ROS_WARN_STREAM_NAMED("diffdope", message);
 }

@@ -26,7 +26,8 @@ void RefinerNodelet::onReconfigure(RefinerConfig& config, uint32_t level) {
     settings = from_config(config, runtime_settings_);
   } catch (const std::invalid_argument& e) {
     // Each refusal answers a request someone just made: logged every time, not throttled.
-    errors_.error("reconfigure", std::string("reconfigure refused, the previous values stay: ") + e.what(), false);
+    errors_.error("reconfigure", std::string("reconfigure refused, the previous values stay: ") + e.what(),
+                  ErrorReporter::Logging::kEveryTime);
     config = applied_config_;  // the server publishes what is in force
     return;
   }
@@ -43,7 +44,7 @@ void RefinerNodelet::onReconfigure(RefinerConfig& config, uint32_t level) {
   NODELET_INFO_STREAM("reconfigured (from the next frame): " << (changes.empty() ? "no value changed"
                                                                                  : describe(changes)));
   const std::string bound = bound_warning(changes);
-  if (!bound.empty()) errors_.warn("reconfigure", "reconfigured value " + bound, false);
+  if (!bound.empty()) errors_.warn("reconfigure", "reconfigured value " + bound, ErrorReporter::Logging::kEveryTime);
 }
 
 }  // namespace diffdope_ros

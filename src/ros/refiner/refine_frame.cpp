@@ -40,7 +40,7 @@ std::vector<diffdope_ros::RefinedPose> RefinerNodelet::refineAndPublish(const Fr
     t.mesh = s.mesh.get();
     t.initial = starts.front().pose;
     for (size_t j = 1; j < starts.size(); ++j) t.alternatives.push_back(starts[j].pose);
-    t.explore = diffdope::explores(starts);  // (shape scan, retry: not from a live track)
+    t.start_kind = diffdope::start_kind(starts);  // (shape scan, retry: not from a live track)
     if (settings_.mask_source == MaskSource::kBox) t.box = diffdope::detector_box(frame.camera, *s.mesh, starts);
     if (!frame.labels.empty()) {
       t.mask = instance_masks[i][used_masks[i]++];

@@ -28,7 +28,7 @@ StreamingTargets streaming_targets(const std::vector<TargetObject>& objects, dou
       if (!starts.empty()) out.seeds.push_back({i, k, std::move(starts)});
     }
   for (const auto& s : out.seeds)
-    out.all_steady = out.all_steady && !diffdope::explores(s.starts) &&
+    out.all_steady = out.all_steady && diffdope::start_kind(s.starts) == diffdope::StartKind::kTracked &&
                      objects[s.object].tracks->track(s.instance).steady(stamp);
   return out;
 }

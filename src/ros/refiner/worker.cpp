@@ -115,13 +115,13 @@ void RefinerNodelet::processStreaming(const std::shared_ptr<const Frame>& frame)
   absorbDetections(*frame);
   const double stamp = frame->header.stamp.toSec();
   const StreamingTargets targets = streaming_targets(targetObjects(), stamp);
-  // Every object on a steady track: the tracking budget (~track_batch_size x ~track_iterations).
-  std::vector<std::string> skipped;
+  // Every object on a steady track: the tracking budget (~track_batch_size x ~track_iterations). (What was
+  // skipped is logged; only a ~refine call's reply lists it too.)
   if (!targets.seeds.empty())
     refineAndPublish(*frame, targets.seeds,
                      targets.all_steady ? diffdope::tracked_options(refiner_options_, track_options_)
                                         : refiner_options_,
-                     &skipped);
+                     nullptr);
   updateTrackingFlags(stamp);
 }
 
