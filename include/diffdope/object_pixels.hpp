@@ -34,9 +34,7 @@ struct ObjectPixelsOptions {
 
 /// The mask term's share of its weight (LossOptions::weight_mask) when the mask is derived, for an object or a
 /// robot: the derived silhouette is no independent observation, its pixels come from the depth the depth term
-/// already compares (and carry its noise), so it counts half. Measured: dev_ycb's easy starts without masks
-/// 99.18 at a half, 98.93 in full, 98.94 without it; the generated arm from depth alone (eight capture sets, 5 mm
-/// depth noise at 1 m) a median camera error of 0.99 mm at a half, 1.15 mm in full (docs/calibration.md).
+/// already compares (and carry its noise), so it counts half (figures: docs/benchmarks.md, docs/calibration.md).
 constexpr double kDerivedMaskWeight = 0.5;
 
 /// The object's pixels (CV_32F in [0, 1]: 1 where depth shows it, a colour probability in holes) in `depth`

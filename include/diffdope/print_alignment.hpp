@@ -2,8 +2,8 @@
 // Print alignment (RefinerOptions::print_search): the last step of a refinement for shapes of near revolution.
 // About such an axis (a bottle's; a mug's body while its handle is out of sight), silhouette and depth look the
 // same after any turn, and the descent's L1 colour term (a flat render against a lit image) barely sees the
-// print, so the descent ends wherever the start's turn left it: measured on dev_bop's bottle and mug, 10-degree
-// starts end 1-8 degrees off, nearly all of it about the axis. Here the result is turned about the axis over a
+// print, so the descent ends wherever the start's turn left it, off nearly all about the axis
+// (docs/benchmarks.md). Here the result is turned about the axis over a
 // range of angles and compared by the texture term (Sobel of log grey: lighting's strength and colour leave it
 // alone), whose minimum sits at the print's true turn once the silhouette is in place.
 #include <functional>
@@ -46,9 +46,8 @@ using PrintEvaluator = std::function<void(const std::vector<Pose>& poses, std::v
 /// Turns `pose` about `axis` (model frame: ShapeRotation::axis through pivot; angle ignored) by up to +-range
 /// radians: of the turns that meet the conditions above, the one with the lowest sum of the texture term and the
 /// refiner's loss, each relative to its value at `pose` (none: no turn). Where the print barely registers (a pose
-/// not yet converged: measured on dev_bop's hard starts with config/fast.yaml) the texture term is nearly flat
-/// over the turns and its lowest value is noise; the loss, whose colour term sees the print a little, then
-/// decides. `texture_weight`: the refiner's own weight of the texture term (its loss = evaluated total -
+/// not yet converged) the texture term is nearly flat over the turns and its lowest value is noise; the loss,
+/// whose colour term sees the print a little, then decides. `texture_weight`: the refiner's own weight of the texture term (its loss = evaluated total -
 /// (1 - texture_weight) * texture).
 PrintAlignment align_print(const Pose& pose, const ShapeRotation& axis, double range, double texture_weight,
                            const PrintEvaluator& evaluate);

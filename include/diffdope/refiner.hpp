@@ -26,8 +26,8 @@ namespace diffdope {
 /// one refinement can take.
 struct RefinerOptions {
   int batch_size = 32;   // B: parallel runs (paper: 32); [1, kMaxBatchSize]
-  /// Gradient steps per run (paper: 100). 48 with the coarse-to-fine schedule below and the Newton steps after
-  /// it (newton_rounds) end within 0.03 AUC of 60 on the dev sets at 80 % of the time (docs/benchmarks.md).
+  /// Gradient steps per run (paper: 100). Fewer suffice with the coarse-to-fine schedule below and the Newton
+  /// steps after it (newton_rounds), which converge what the steps leave short (docs/benchmarks.md).
   int iterations = 48;  // [0, kMaxIterations]
   /// Learning-rate bounds, dimensionless. A step moves the object's centre by about lr * 2 * diameter * (loss
   /// slope) and turns it by about 4 * lr * (slope) radians: translation gradients are scaled by diameter^2 and
