@@ -146,16 +146,16 @@ struct RefinerOptions {
   /// label) lines up only 1-3 standard deviations above chance at the right pose, while a print that is not
   /// even one above it does not line up at all. Between the bar and clear evidence (kClearPrint, 3) the shape
   /// must fit better (judge() in verdict.hpp); the scan's choices use kClearPrint too.
-  /// The shape's bars say that a fifth of the evidence disagreeing contradicts the pose: results 12-185 mm off
-  /// that kept much of their outline (a tilted cylinder, a box turned into a look-alike outline) fall to 0.66-0.75
-  /// on mask or depth, right ones score 0.9-1 with an exact mask and depth within inlier_threshold
-  /// (docs/benchmarks.md, "The verdict"). Lower min_mask_iou for a coarse detector mask.
+  /// The shape's bars say that a fifth of the evidence disagreeing contradicts the pose: wrong results that keep
+  /// much of their outline (a tilted cylinder, a box turned into a look-alike outline) fall below them on mask or
+  /// depth, right ones stay above (figures: docs/benchmarks.md, "The verdict"). Lower min_mask_iou for a coarse
+  /// detector mask.
   double min_mask_iou = 0.8;       // [0, 1]
   double min_depth_inliers = 0.8;  // [0, 1]
   double min_print_significance = 1.0;  // [0, 100]
   /// The loss is probed around the result at this mean displacement of the model surface (metres, the unit of
   /// ADD): RefineResult::curvature, the loss's curvature and its least constrained direction (pose_curvature.hpp;
-  /// 15 evaluations, ~1 % of a default refinement). 0 = no probe.
+  /// 15 evaluations). 0 = no probe.
   double probe_distance = 0.01;  // [0, 1]
   RenderOptions render;  // back-face culling, near plane, threads
   /// Backend: cpu, cuda (an error without a device) or auto (CUDA when a device is present, else the CPU with
