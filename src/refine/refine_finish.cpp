@@ -25,7 +25,7 @@ PrintRegistration RefineRun::register_render(const RenderImage& img) const {
   return register_print(obs.rgb, img.color, interior, 8, loss_.texture_epsilon);
 }
 
-double RefineRun::print_significance(Renderer& renderer, const Pose& pose) const {
+double RefineRun::print_significance(Renderer& renderer, const Pose& pose) {
   // A continuous declared symmetry turns the print with the object: it cannot be registered along that axis.
   if (meshes_.size() != 1 || !fine_[0].obs.has_rgb() || !meshes_[0]->symmetry.continuous.empty())
     return std::numeric_limits<double>::quiet_NaN();
@@ -285,7 +285,7 @@ void RefineRun::align_result_print(Renderer& renderer, RefineResult& res, Result
   print.z = z_aligned, print.known = true;
 }
 
-int RefineRun::score_views(Renderer& renderer, RefineResult& res) const {
+int RefineRun::score_views(Renderer& renderer, RefineResult& res) {
   // Quality scores at the refined pose, per view; the result's are the weakest view's.
   const bool one_view = meshes_.size() == 1;
   int rendered_pixels = 0;
@@ -333,7 +333,7 @@ int RefineRun::score_views(Renderer& renderer, RefineResult& res) const {
   return rendered_pixels;
 }
 
-void RefineRun::judge_result(Renderer& renderer, RefineResult& res, int rendered_pixels) const {
+void RefineRun::judge_result(Renderer& renderer, RefineResult& res, int rendered_pixels) {
   const RefinerOptions& o = options_;
   const bool one_view = meshes_.size() == 1;
   const Mesh& mesh0 = *meshes_.front();

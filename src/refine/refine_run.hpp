@@ -109,7 +109,7 @@ class RefineRun {
   PrintRegistration register_render(const RenderImage& img) const;
   /// PrintRegistration::significance() at `pose` (one render at the fine scale); NaN when not measurable (no
   /// rgb, several views, a plain model, a continuous declared symmetry).
-  double print_significance(Renderer& renderer, const Pose& pose) const;
+  double print_significance(Renderer& renderer, const Pose& pose);
 
   /// The camera and images of view `v` at this iteration (coarse, then fine).
   const Camera& camera(size_t v = 0) const { return coarse() ? coarse_[v].cam : fine_[v].cam; }
@@ -167,7 +167,7 @@ class RefineRun {
   double print_range_ = 0;
   int polish_iterations_ = 0;
   int newton_rounds_ = 0;
-  mutable long evaluations_ = 0;  // hypothesis evaluations (and plain renders) so far, every view
+  long evaluations_ = 0;          // hypothesis evaluations (and plain renders) so far, every view
   /// The last descent (RefinerOptions::polish_iterations) from res.pose, keeping the lowest loss seen.
   void polish(Renderer& renderer, RefineResult& res);
   /// The Newton steps (RefinerOptions::newton_rounds) from res.pose, each taken on kNewtonEvidence.
@@ -179,7 +179,7 @@ class RefineRun {
   void take(RefineResult& res, int i) const;
   /// The result's print significance, measured once when needed (the candidate's check, the print turn's).
   struct ResultPrint {
-    const RefineRun& run;
+    RefineRun& run;
     double z = 0;
     bool known = false;
     double at(Renderer& renderer, const RefineResult& res);
@@ -192,9 +192,9 @@ class RefineRun {
   /// The print alignment's turn about print_axes_, kept when the loss and the print's registration allow it.
   void align_result_print(Renderer& renderer, RefineResult& res, ResultPrint& print);
   /// Mask IoU, depth inliers and print registration at the result, per view; returns the rendered pixels.
-  int score_views(Renderer& renderer, RefineResult& res) const;
+  int score_views(Renderer& renderer, RefineResult& res);
   /// Curvature, covariance, convergence, verdict and time of the result.
-  void judge_result(Renderer& renderer, RefineResult& res, int rendered_pixels) const;
+  void judge_result(Renderer& renderer, RefineResult& res, int rendered_pixels);
   int scan_at_ = -1;         // the iteration whose batch() is preceded by the scan (-1: none)
   bool scanning_ = false, scanned_ = false;
   double best_overall_;
