@@ -72,6 +72,10 @@ struct MeshLod {
   int num_vertices() const { return static_cast<int>(positions.size()); }
 };
 
+/// The most meshes a cache keyed by Mesh::content_id() holds (the renderer's uploads, the refiner's shape
+/// analyses): a node that sees ever new meshes stays bounded, and a cache that is full starts again.
+constexpr size_t kMaxCachedMeshes = 64;
+
 class Mesh {
  public:
   std::vector<Vec3f> positions;  // metres, model frame

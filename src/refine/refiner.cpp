@@ -226,7 +226,7 @@ RefineResult Refiner::drive(RefineRun& run) {
 const std::vector<ShapeRotation>& Refiner::shape_rotations(const Mesh& mesh) {
   auto cached = shape_rotations_.find(mesh.content_id());
   if (cached == shape_rotations_.end()) {
-    if (shape_rotations_.size() >= 64) shape_rotations_.clear();  // a node that sees many meshes stays bounded
+    if (shape_rotations_.size() >= kMaxCachedMeshes) shape_rotations_.clear();
     cached = shape_rotations_.emplace(mesh.content_id(), analyse_shape_rotations(mesh)).first;
   }
   return cached->second;
@@ -254,7 +254,7 @@ std::vector<ShapeRotation> Refiner::print_axes(const RefinerOptions& o, const Me
   const auto key = std::make_pair(mesh.content_id(), o.explore_tolerance);
   auto fitted = revolution_fits_.find(key);
   if (fitted == revolution_fits_.end()) {
-    if (revolution_fits_.size() >= 64) revolution_fits_.clear();
+    if (revolution_fits_.size() >= kMaxCachedMeshes) revolution_fits_.clear();
     fitted = revolution_fits_.emplace(key, fit_revolution_axis(mesh, o.explore_tolerance)).first;
   }
   // Several principal axes of revolution (a ball): every direction is one; the fit adds nothing.

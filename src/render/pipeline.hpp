@@ -165,7 +165,7 @@ class PipelineRenderer final : public Renderer {
     typename Exec::template Buffer<TextureView> textures;
     uint64_t used = 0;  // uses_ at the last call that used it
   };
-  static constexpr size_t kMaxMeshes = 64;
+  static constexpr size_t kMaxMeshes = kMaxCachedMeshes;
 
   const ExecMesh& upload_mesh(const Mesh& mesh) {
     if (mesh.num_triangles() == 0 || mesh.neighbors().size() != mesh.triangles.size() || mesh.content_id() == 0)
