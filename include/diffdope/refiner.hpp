@@ -377,13 +377,14 @@ class Refiner {
   bool is_declared_turn(const RefinerOptions& o, const Mesh& mesh, const Pose& turn) const;
   /// The shape analysis of `mesh`, computed once per mesh.
   const std::vector<ShapeRotation>& shape_rotations(const Mesh& mesh);
-  /// The refinement loop of one run (refine(), refine_views()); refine_all() steps several in lockstep.
-  RefineResult drive(RefineRun& run);
-  /// One pass of refine() / refine_all(), without the retry; refine_once() throws on unusable input.
-  RefineResult refine_once(const RefinerOptions& o, const Camera& camera, const Observation& observed,
-                           const Mesh& mesh, const std::vector<Pose>& initials);
-  std::vector<RefineResult> refine_all_once(const RefinerOptions& o, const Camera& camera, const Observation& frame,
-                                            const std::vector<ObjectTarget>& objects);
+  using Progress = std::function<void(int iteration, int total, double best_loss)>;
+  /// refine() and refine_all(): a pass, then the retry of the rejected fresh starts (RefinerOptions::retry_turn).
+  /// `progress`: on_iteration (refine()), or null.
+  std::vector<RefineResult> refine_targets(const RefinerOptions& o, const Camera& camera, const Observation& frame,
+                                           const std::vector<ObjectTarget>& objects, const Progress& progress);
+  /// One pass of refine_targets(), without the retry: every object's run in lockstep on the frame resized once.
+  std::vector<RefineResult> refine_pass(const RefinerOptions& o, const Camera& camera, const Observation& frame,
+                                        const std::vector<ObjectTarget>& objects, const Progress& progress);
   /// Whether `first` is rejected and due for a retry (RefinerOptions::retry_turn).
   static bool wants_retry(const RefinerOptions& o, const RefineResult& first);
   /// The retry's starts: `initials`, then each turned by +-retry_turn about the principal axes of `mesh`.

@@ -261,8 +261,13 @@ void RefineRun::update_object_pixels(Renderer& renderer) {
 
 void RefineRun::evaluate(Renderer& renderer, const std::vector<Pose>& poses, const LossOptions& loss,
                          bool with_gradient, std::vector<LossValue>& out, bool fine) {
-  const auto level = [&](size_t v) -> const Level& { return fine || !coarse() ? fine_[v] : coarse_[v]; };
   evaluations_ += long(poses.size() * meshes_.size());
+  evaluate_views(renderer, poses, loss, with_gradient, out, fine);
+}
+
+void RefineRun::evaluate_views(Renderer& renderer, const std::vector<Pose>& poses, const LossOptions& loss,
+                               bool with_gradient, std::vector<LossValue>& out, bool fine) {
+  const auto level = [&](size_t v) -> const Level& { return fine || !coarse() ? fine_[v] : coarse_[v]; };
   if (meshes_.size() == 1) {
     renderer.evaluate(level(0).cam, *meshes_[0], level(0).obs, poses, loss, with_gradient, out);
     return;
@@ -282,7 +287,8 @@ void RefineRun::evaluate(Renderer& renderer, const std::vector<Pose>& poses, con
     }
 }
 
-const std::vector<Pose>& RefineRun::batch() {
+RefineRun::Step RefineRun::next_step(Renderer& renderer) {
+  update_object_pixels(renderer);
   const int iters = options_.iterations;
   const bool last = k_ == iters;
   const int due = halvings_due(k_, iters);
@@ -309,62 +315,77 @@ const std::vector<Pose>& RefineRun::batch() {
     stale_ = 0;
     pixels_changed_ = false;
   }
-  if (k_ == scan_at_ && !scanned_ && !last) {  // every run turned by every shape turn (itself first)
-    scanning_ = true;
+  const Level& level = coarse() ? coarse_.front() : fine_.front();
+  Step step;
+  step.camera = &level.cam;
+  step.mask = level.obs.mask;
+  step.scan = k_ == scan_at_ && !scanned_ && !last;
+  step.with_gradient = !step.scan && !last;
+  step.loss = step.scan ? scan_loss_ : loss_;
+  if (step.scan) {  // every run turned by every shape turn (itself first)
     const size_t n = 1 + turns_.size();
-    batch_.resize(active_.size() * n);
+    step.poses.resize(active_.size() * n);
     for (size_t j = 0; j < active_.size(); ++j) {
-      batch_[j * n] = poses_[active_[j]];
-      for (size_t t = 0; t < turns_.size(); ++t) batch_[j * n + 1 + t] = poses_[active_[j]] * turns_[t];
+      step.poses[j * n] = poses_[active_[j]];
+      for (size_t t = 0; t < turns_.size(); ++t) step.poses[j * n + 1 + t] = poses_[active_[j]] * turns_[t];
     }
-    return batch_;
+    return step;
   }
-  batch_.resize(active_.size());
-  for (size_t j = 0; j < active_.size(); ++j) batch_[j] = poses_[active_[j]];
-  return batch_;
+  step.poses.resize(active_.size());
+  for (size_t j = 0; j < active_.size(); ++j) step.poses[j] = poses_[active_[j]];
+  return step;
 }
 
-void RefineRun::absorb(const std::vector<LossValue>& values, const std::function<void(int, int, double)>& on_iteration) {
+void RefineRun::evaluate_step(Renderer& renderer, const Step& step, std::vector<LossValue>& values) {
+  evaluate_views(renderer, step.poses, step.loss, step.with_gradient, values, false);  // (absorb() counts it)
+}
+
+void RefineRun::add_scan_candidates(const Step& scan, const std::vector<LossValue>& values) {
+  const size_t n = 1 + turns_.size();
+  std::vector<size_t> from(n, SIZE_MAX);  // per turn, the batch row of the run it is lowest for
+  for (size_t j = 0; j < active_.size(); ++j) {
+    size_t best = 0;
+    for (size_t t = 1; t < n; ++t)
+      if (values[j * n + t].total < values[j * n + best].total) best = t;
+    // A turn must be clearly better: on a print the loss barely sees, near ties would pick one at random.
+    if (best == 0 || !(values[j * n + best].total < (1.0 - kScanMargin) * values[j * n].total)) continue;
+    if (from[best] == SIZE_MAX || values[j * n + best].total < values[from[best] * n + best].total) from[best] = j;
+  }
+  // The lowest of them (kScanCandidates): the final choice weighs only the best candidate, and each costs a
+  // run through the fine phase (measured: one instead of one per turn, the same results on the dev sets).
+  std::vector<size_t> order;
+  for (size_t t = 1; t < n; ++t)
+    if (from[t] != SIZE_MAX) order.push_back(t);
+  std::stable_sort(order.begin(), order.end(), [&](size_t a, size_t b) {
+    return values[from[a] * n + a].total < values[from[b] * n + b].total;
+  });
+  if (order.size() > size_t(kScanCandidates)) order.resize(size_t(kScanCandidates));
+  for (size_t t : order) {
+    const int source = active_[from[t]];
+    const int i = int(poses_.size());
+    poses_.push_back(scan.poses[from[t] * n + t]);
+    best_pose_.push_back(poses_.back());
+    best_.push_back(LossValue());
+    best_.back().total = std::numeric_limits<double>::infinity();
+    res_.learning_rates.push_back(res_.learning_rates[size_t(source)]);
+    // (NaN until the scan: its history lines up with the other runs' iterations)
+    res_.run_histories.emplace_back(res_.run_histories[size_t(source)].size(),
+                                    std::numeric_limits<double>::quiet_NaN());
+    source_.push_back(source);
+    jump_angle_.push_back(Eigen::AngleAxisd(turns_[t - 1].R).angle());
+    active_.push_back(i);
+    ++res_.scan_turns;
+  }
+}
+
+void RefineRun::absorb(const Step& step, const std::vector<LossValue>& values,
+                       const std::function<void(int, int, double)>& on_iteration) {
   const RefinerOptions& o = options_;
   const int iters = o.iterations, starts = int(initials_.size());
   const bool last = k_ == iters;
-  if (scanning_) {  // candidates: a new run from each turn some run prefers; the runs go on unturned; no step
-    const size_t n = 1 + turns_.size();
-    std::vector<size_t> from(n, SIZE_MAX);  // per turn, the batch row of the run it is lowest for
-    for (size_t j = 0; j < active_.size(); ++j) {
-      size_t best = 0;
-      for (size_t t = 1; t < n; ++t)
-        if (values[j * n + t].total < values[j * n + best].total) best = t;
-      // A turn must be clearly better: on a print the loss barely sees, near ties would pick one at random.
-      if (best == 0 || !(values[j * n + best].total < (1.0 - kScanMargin) * values[j * n].total)) continue;
-      if (from[best] == SIZE_MAX || values[j * n + best].total < values[from[best] * n + best].total) from[best] = j;
-    }
-    // The lowest of them (kScanCandidates): the final choice weighs only the best candidate, and each costs a
-    // run through the fine phase (measured: one instead of one per turn, the same results on the dev sets).
-    std::vector<size_t> order;
-    for (size_t t = 1; t < n; ++t)
-      if (from[t] != SIZE_MAX) order.push_back(t);
-    std::stable_sort(order.begin(), order.end(), [&](size_t a, size_t b) {
-      return values[from[a] * n + a].total < values[from[b] * n + b].total;
-    });
-    if (order.size() > size_t(kScanCandidates)) order.resize(size_t(kScanCandidates));
-    for (size_t t : order) {
-      const int source = active_[from[t]];
-      const int i = int(poses_.size());
-      poses_.push_back(batch_[from[t] * n + t]);
-      best_pose_.push_back(poses_.back());
-      best_.push_back(LossValue());
-      best_.back().total = std::numeric_limits<double>::infinity();
-      res_.learning_rates.push_back(res_.learning_rates[size_t(source)]);
-      // (NaN until the scan: its history lines up with the other runs' iterations)
-      res_.run_histories.emplace_back(res_.run_histories[size_t(source)].size(),
-                                      std::numeric_limits<double>::quiet_NaN());
-      source_.push_back(source);
-      jump_angle_.push_back(Eigen::AngleAxisd(turns_[t - 1].R).angle());
-      active_.push_back(i);
-      ++res_.scan_turns;
-    }
-    scanning_ = false;
+  evaluations_ += long(step.poses.size() * meshes_.size());
+  if (step.scan) {  // candidates; the runs go on unturned; no step
+    add_scan_candidates(step, values);
     scanned_ = true;
     return;
   }

@@ -80,27 +80,34 @@ class RefineRun {
     print_range_ = range;
   }
   bool done() const { return done_; }
-  /// Without a mask but with depth (RefinerOptions::derive_mask): derives the object's pixels when they are due,
-  /// about the starts before the first batch and about the best runs when the fine phase begins (the drivers
-  /// call it before batch()); finish() derives them once more about the chosen result.
-  void update_object_pixels(Renderer& renderer);
-  /// The poses to evaluate this iteration (the active runs; during the shape scan, each turned by every
-  /// shape turn).
-  const std::vector<Pose>& batch();
-  /// Gradients are needed except on the last iteration and in the shape scan (call after batch()).
-  bool with_gradient() const { return !scanning_ && k_ < options_.iterations; }
-  /// Takes this iteration's values for batch(), keeps each run's best and steps the runs (after the scan: adds
-  /// the candidate run, without a step).
-  void absorb(const std::vector<LossValue>& values, const std::function<void(int, int, double)>& on_iteration);
+  /// The first of the starts (a failed run's result keeps it).
+  const Pose& first_start() const { return initials_.front(); }
+
+  /// One iteration's evaluation: what the driver renders and scores, and what absorb() takes back with the values.
+  struct Step {
+    std::vector<Pose> poses;  // the active runs' poses; in the shape scan, each run turned by every shape turn
+    LossOptions loss;         // the scan's adds the texture term (RefinerOptions::explore_texture_weight)
+    bool with_gradient = true;  // not on the last iteration nor in the scan
+    bool scan = false;
+    const Camera* camera = nullptr;  // this iteration's scale (coarse, then fine); view 0
+    cv::Mat mask;                    // the object's observed mask at that scale (given, derived or the window)
+  };
+  /// The next iteration's step. Without a mask but with depth (RefinerOptions::derive_mask) it first derives the
+  /// object's pixels when they are due: about the starts before the first step and about the best runs when the
+  /// fine phase begins (finish() derives them once more about the chosen result).
+  Step next_step(Renderer& renderer);
+  /// Evaluates `step` alone, in every view (a run whose images no other run shares); absorb() counts it.
+  void evaluate_step(Renderer& renderer, const Step& step, std::vector<LossValue>& values);
+  /// Takes the values of `step` (from next_step()), counts its evaluations, keeps each run's best and steps the
+  /// runs (after the scan: adds the candidate run, without a step). `on_iteration`: Refiner::on_iteration.
+  void absorb(const Step& step, const std::vector<LossValue>& values,
+              const std::function<void(int, int, double)>& on_iteration);
   /// Evaluates `poses` in every view at this iteration's scale (`fine`: at the fine scale) and gives each pose
   /// the mean over the views (terms, total and gradient: the views share the camera frame the gradient is in).
   void evaluate(Renderer& renderer, const std::vector<Pose>& poses, const LossOptions& loss, bool with_gradient,
                 std::vector<LossValue>& out, bool fine = false);
   /// Winner and quality scores (renders the refined pose once per view).
   RefineResult finish(Renderer& renderer);
-  /// Counts evaluations made for this run outside evaluate() (refine_all's joint renderer calls), for
-  /// RefineResult::evaluations.
-  void count_evaluations(long n) { evaluations_ += n; }
   /// Iterations of the last descent from the chosen pose (RefinerOptions::polish_iterations; 0: none).
   void set_polish(int iterations) { polish_iterations_ = iterations; }
   /// Rounds of Newton steps after the print alignment (RefinerOptions::newton_rounds; 0: none).
@@ -111,12 +118,8 @@ class RefineRun {
   /// rgb, several views, a plain model, a continuous declared symmetry).
   double print_significance(Renderer& renderer, const Pose& pose);
 
-  /// The camera and images of view `v` at this iteration (coarse, then fine).
-  const Camera& camera(size_t v = 0) const { return coarse() ? coarse_[v].cam : fine_[v].cam; }
-  const Observation& observation(size_t v = 0) const { return coarse() ? coarse_[v].obs : fine_[v].obs; }
+  /// Whether the next step is at the coarse scale (its images differ from the fine phase's).
   bool coarse() const { return k_ < switch_at_; }
-  /// The loss of this iteration's batch() (the scan's adds the texture term; call after batch()).
-  const LossOptions& loss() const { return scanning_ ? scan_loss_ : loss_; }
   const Mesh& mesh(size_t v = 0) const { return *meshes_[v]; }
   size_t views() const { return meshes_.size(); }
 
@@ -149,7 +152,7 @@ class RefineRun {
   void use_pixels(const cv::Mat& pixels);  // as the mask, at both scales
   double diameter_ = 1.0;
   RefineResult res_;
-  std::vector<Pose> poses_, best_pose_, batch_;
+  std::vector<Pose> poses_, best_pose_;
   std::vector<LossValue> best_;
   std::vector<int> active_;  // runs still descending (successive halving drops the worst)
   // Per run: the run a shape-scan candidate was turned from (-1: a run from the starts, indices < batch_size)
@@ -195,8 +198,15 @@ class RefineRun {
   int score_views(Renderer& renderer, RefineResult& res);
   /// Curvature, covariance, convergence, verdict and time of the result.
   void judge_result(Renderer& renderer, RefineResult& res, int rendered_pixels);
-  int scan_at_ = -1;         // the iteration whose batch() is preceded by the scan (-1: none)
-  bool scanning_ = false, scanned_ = false;
+  int scan_at_ = -1;         // the iteration whose step is preceded by the scan (-1: none)
+  /// evaluate() without counting (the steps are counted by absorb()).
+  void evaluate_views(Renderer& renderer, const std::vector<Pose>& poses, const LossOptions& loss,
+                      bool with_gradient, std::vector<LossValue>& out, bool fine);
+  /// Derives the object's pixels when they are due (next_step()).
+  void update_object_pixels(Renderer& renderer);
+  /// The scan's candidates: a new run from each turn some run prefers (absorb()).
+  void add_scan_candidates(const Step& scan, const std::vector<LossValue>& values);
+  bool scanned_ = false;
   double best_overall_;
   bool done_ = false;
 };

@@ -152,26 +152,14 @@ RefineResult Refiner::refine(const Camera& camera, const Observation& observed, 
 RefineResult Refiner::refine(const Camera& camera, const Observation& observed, const Mesh& mesh,
                              const std::vector<Pose>& initials, const RefinerOptions& options) {
   const RefinerOptions& o = checked(options);
-  const auto start = std::chrono::steady_clock::now();
-  RefineResult first;
-  try {
-    first = refine_once(o, camera, observed, mesh, initials);
-  } catch (const std::exception& e) {
-    return failed_result(initials.empty() ? Pose() : initials.front(), e.what());
-  }
-  if (!wants_retry(o, first)) return first;
-  // The retry's starts are the same input turned: what the first pass accepted, it accepts.
-  RefineResult retry = refine_once(o, camera, observed, mesh, retry_starts(o, mesh, initials));
-  return keep_better(std::move(first), std::move(retry), milliseconds_since(start), weighs_print(o, mesh));
-}
-
-RefineResult Refiner::refine_once(const RefinerOptions& o, const Camera& camera, const Observation& observed,
-                                  const Mesh& mesh, const std::vector<Pose>& initials) {
-  RefineRun run(o, camera, observed, mesh, initials, shape_turns(o, mesh, StartKind::kFresh));
-  run.set_print_axes(print_axes(o, mesh), o.print_search);
-  run.set_polish(o.polish_iterations);
-  run.set_newton(o.newton_rounds);
-  return drive(run);
+  if (initials.empty()) return failed_result(Pose(), "refine: no initial pose");
+  ObjectTarget target;
+  target.mesh = &mesh;
+  target.initial = initials.front();
+  target.alternatives.assign(initials.begin() + 1, initials.end());
+  target.mask = observed.mask;
+  target.box = observed.box;
+  return refine_targets(o, camera, observed, {target}, on_iteration).front();
 }
 
 bool Refiner::wants_retry(const RefinerOptions& o, const RefineResult& first) {
@@ -198,29 +186,132 @@ std::vector<Pose> Refiner::retry_starts(const RefinerOptions& o, const Mesh& mes
   return starts;
 }
 
+namespace {
+
+using Progress = std::function<void(int iteration, int total, double best_loss)>;
+
+/// The frame at the refiner's scales, shared by single-view runs (refine_all); null: each run evaluates its own
+/// images (refine_views()).
+struct SharedImages {
+  const Observation* fine = nullptr;
+  const Observation* coarse = nullptr;
+};
+
+/// Evaluates the steps of runs `which` (values[j] for steps[j]): on the shared `images` in one renderer call,
+/// or each run alone without them. Returns per step the error that kept it from being evaluated (empty: none).
+std::vector<std::string> evaluate_steps(Renderer& renderer, std::vector<std::unique_ptr<RefineRun>>& runs,
+                                        const std::vector<size_t>& which, const std::vector<RefineRun::Step>& steps,
+                                        const Observation* images, std::vector<std::vector<LossValue>>& values) {
+  std::vector<std::string> errors(which.size());
+  const auto alone = [&](size_t j, const auto& evaluate) {
+    try {
+      evaluate();
+    } catch (const std::exception& e) {
+      errors[j] = e.what();
+    }
+  };
+  if (!images) {  // runs of their own images (several views): each alone
+    for (size_t j = 0; j < which.size(); ++j)
+      alone(j, [&] { runs[which[j]]->evaluate_step(renderer, steps[j], values[j]); });
+    return errors;
+  }
+  // Every object's hypotheses in one renderer call (the CUDA backend launches them together); the objects share
+  // the frame's scaled rgb / depth / edges, each brings its own mask.
+  std::vector<ObjectBatch> batches(which.size());
+  bool with_gradient = false;
+  for (size_t j = 0; j < which.size(); ++j) {
+    batches[j].mesh = &runs[which[j]]->mesh();
+    batches[j].mask = steps[j].mask;
+    batches[j].poses = steps[j].poses;
+    batches[j].loss = steps[j].loss;
+    with_gradient = with_gradient || steps[j].with_gradient;
+  }
+  const Camera& camera = *steps[0].camera;  // the same scaled camera for every object of the phase
+  try {
+    renderer.evaluate_objects(camera, *images, batches, with_gradient, values);
+  } catch (const std::exception&) {
+    // One object's input broke the joint call: evaluate them one by one so only that object fails.
+    for (size_t j = 0; j < which.size(); ++j)
+      alone(j, [&] {
+        std::vector<std::vector<LossValue>> one;
+        renderer.evaluate_objects(camera, *images, {batches[j]}, with_gradient, one);
+        values[j] = std::move(one[0]);
+      });
+  }
+  return errors;
+}
+
+/// The one driver: steps `runs` in lockstep until each is done, then finishes them. A run that throws gets its
+/// first start and the reason as its result, and the others go on. `progress`: Refiner::on_iteration, or null.
+std::vector<RefineResult> run_to_results(Renderer& renderer, std::vector<std::unique_ptr<RefineRun>>& runs,
+                                         const SharedImages& shared, const Progress& progress) {
+  std::vector<RefineResult> out(runs.size());
+  const auto fail = [&](size_t k, const std::string& why) {
+    out[k] = failed_result(runs[k]->first_start(), why);
+    runs[k].reset();
+  };
+  std::vector<size_t> which;
+  std::vector<RefineRun::Step> steps;
+  std::vector<std::vector<LossValue>> values;
+  for (bool any = true; any;) {
+    any = false;
+    // Runs in the coarse phase and runs in the fine phase are evaluated in separate calls (other images).
+    for (const bool coarse : {true, false}) {
+      which.clear();
+      steps.clear();
+      for (size_t k = 0; k < runs.size(); ++k) {
+        if (!runs[k] || runs[k]->done() || runs[k]->coarse() != coarse) continue;
+        try {
+          steps.push_back(runs[k]->next_step(renderer));
+          which.push_back(k);
+        } catch (const std::exception& e) {
+          fail(k, e.what());
+        }
+      }
+      if (which.empty()) continue;
+      any = true;
+      const Observation* images = coarse ? shared.coarse : shared.fine;
+      values.assign(which.size(), {});
+      std::vector<std::string> errors = evaluate_steps(renderer, runs, which, steps, images, values);
+      for (size_t j = 0; j < which.size(); ++j) {
+        if (!errors[j].empty()) {
+          fail(which[j], errors[j]);
+          continue;
+        }
+        try {
+          runs[which[j]]->absorb(steps[j], values[j], progress);
+        } catch (const std::exception& e) {
+          fail(which[j], e.what());
+        }
+      }
+    }
+  }
+  for (size_t k = 0; k < runs.size(); ++k) {
+    if (!runs[k]) continue;
+    try {
+      out[k] = runs[k]->finish(renderer);
+    } catch (const std::exception& e) {
+      fail(k, e.what());
+    }
+  }
+  return out;
+}
+
+}  // namespace
+
 RefineResult Refiner::refine_views(const std::vector<RefineView>& views, const std::vector<Pose>& initials,
                                    const Eigen::Vector3d& pivot_model, const RefinerOptions& options) {
   const RefinerOptions& o = checked(options);
+  std::vector<std::unique_ptr<RefineRun>> runs(1);
   try {
     if (!pivot_model.allFinite()) throw std::invalid_argument("refine_views: the pivot is not finite");
-    RefineRun run(o, views, initials, {}, nullptr, nullptr, &pivot_model);
-    run.set_polish(o.polish_iterations);
-    run.set_newton(o.newton_rounds);
-    return drive(run);
+    runs[0] = std::make_unique<RefineRun>(o, views, initials, std::vector<Pose>{}, nullptr, nullptr, &pivot_model);
+    runs[0]->set_polish(o.polish_iterations);
+    runs[0]->set_newton(o.newton_rounds);
   } catch (const std::exception& e) {
     return failed_result(initials.empty() ? Pose() : initials.front(), e.what());
   }
-}
-
-RefineResult Refiner::drive(RefineRun& run) {
-  std::vector<LossValue> values;
-  while (!run.done()) {
-    run.update_object_pixels(*renderer_);
-    const std::vector<Pose>& poses = run.batch();  // (before with_gradient() and loss(): a scan differs)
-    run.evaluate(*renderer_, poses, run.loss(), run.with_gradient(), values);
-    run.absorb(values, on_iteration);
-  }
-  return run.finish(*renderer_);
+  return run_to_results(*renderer_, runs, SharedImages{}, on_iteration).front();
 }
 
 const std::vector<ShapeRotation>& Refiner::shape_rotations(const Mesh& mesh) {
@@ -284,9 +375,14 @@ std::vector<ShapeRotation> Refiner::print_axes(const RefinerOptions& o, const Me
 std::vector<RefineResult> Refiner::refine_all(const Camera& camera, const Observation& frame,
                                               const std::vector<ObjectTarget>& objects,
                                               const RefinerOptions& options) {
-  const RefinerOptions& o = checked(options);
+  return refine_targets(checked(options), camera, frame, objects, nullptr);
+}
+
+std::vector<RefineResult> Refiner::refine_targets(const RefinerOptions& o, const Camera& camera,
+                                                  const Observation& frame, const std::vector<ObjectTarget>& objects,
+                                                  const Progress& progress) {
   const auto start = std::chrono::steady_clock::now();
-  std::vector<RefineResult> out = refine_all_once(o, camera, frame, objects);
+  std::vector<RefineResult> out = refine_pass(o, camera, frame, objects, progress);
   // The rejected objects (not tracked starts) again, in lockstep among themselves, from turned starts.
   std::vector<ObjectTarget> again;
   std::vector<size_t> which;
@@ -299,7 +395,8 @@ std::vector<RefineResult> Refiner::refine_all(const Camera& camera, const Observ
     which.push_back(k);
   }
   if (again.empty()) return out;
-  std::vector<RefineResult> retried = refine_all_once(o, camera, frame, again);
+  // The retry's starts are the same input turned: what the first pass accepted, it accepts.
+  std::vector<RefineResult> retried = refine_pass(o, camera, frame, again, progress);
   const double ms = milliseconds_since(start);
   for (size_t j = 0; j < which.size(); ++j)
     out[which[j]] =
@@ -307,23 +404,21 @@ std::vector<RefineResult> Refiner::refine_all(const Camera& camera, const Observ
   return out;
 }
 
-std::vector<RefineResult> Refiner::refine_all_once(const RefinerOptions& options, const Camera& camera,
-                                                   const Observation& frame, const std::vector<ObjectTarget>& objects) {
-  std::vector<RefineResult> out(objects.size());
-  std::vector<std::unique_ptr<RefineRun>> runs(objects.size());
+std::vector<RefineResult> Refiner::refine_pass(const RefinerOptions& options, const Camera& camera,
+                                               const Observation& frame, const std::vector<ObjectTarget>& objects,
+                                               const Progress& progress) {
   // The frame is resized (and its edges found) once for all objects. A frame that does not fit the camera is
   // reported by each object's own check below.
-  std::optional<Observation> shared_frame, coarse_frame;
+  std::optional<Observation> fine_frame, coarse_frame;
   try {
-    shared_frame = scale_frame(camera, frame, options, options.image_scale, true);
+    fine_frame = scale_frame(camera, frame, options, options.image_scale, true);
     if (coarse_iterations(options) > 0)
       coarse_frame = scale_frame(camera, frame, options, options.image_scale * options.coarse_scale, false);
   } catch (const std::invalid_argument&) {
   }
-  const auto fail = [&](size_t k, const std::string& why) {
-    out[k] = failed_result(objects[k].initial, why);
-    runs[k].reset();
-  };
+  const SharedImages shared{fine_frame ? &*fine_frame : nullptr, coarse_frame ? &*coarse_frame : nullptr};
+  std::vector<RefineResult> out(objects.size());
+  std::vector<std::unique_ptr<RefineRun>> runs(objects.size());
   for (size_t k = 0; k < objects.size(); ++k) {
     const ObjectTarget& t = objects[k];
     try {
@@ -331,83 +426,20 @@ std::vector<RefineResult> Refiner::refine_all_once(const RefinerOptions& options
       const Observation o =
           frame.with_mask(t.mask.empty() || t.mask.type() == CV_32FC1 ? t.mask : to_mask_float(t.mask), t.box);
       runs[k] = std::make_unique<RefineRun>(options, camera, o, *t.mesh, starts_of(t),
-                                            shape_turns(options, *t.mesh, t.start_kind),
-                                            shared_frame ? &*shared_frame : nullptr,
-                                            coarse_frame ? &*coarse_frame : nullptr);
+                                            shape_turns(options, *t.mesh, t.start_kind), shared.fine, shared.coarse);
       const bool fresh = t.start_kind == StartKind::kFresh;
       runs[k]->set_print_axes(print_axes(options, *t.mesh), fresh ? options.print_search
                                                                   : std::min(options.print_search, kTrackedPrintSearch));
       runs[k]->set_polish(fresh ? options.polish_iterations : 0);
       runs[k]->set_newton(options.newton_rounds);
     } catch (const std::exception& e) {
-      fail(k, e.what());
+      out[k] = failed_result(t.initial, e.what());
     }
   }
-  // Lockstep: each iteration evaluates the active runs of every object in one renderer call (the CUDA backend
-  // launches them together). The objects share the scaled rgb / depth / edges; each brings its own mask.
-  if (!shared_frame) return out;  // every object has failed its check
-  std::vector<ObjectBatch> batches;
-  std::vector<size_t> which;
-  std::vector<std::vector<LossValue>> values;
-  for (bool any = true; any;) {
-    any = false;
-    // Runs in the coarse phase and runs in the fine phase are evaluated in separate calls (other images).
-    for (const bool coarse : {true, false}) {
-      batches.clear();
-      which.clear();
-      bool with_gradient = false;
-      for (size_t k = 0; k < runs.size(); ++k) {
-        if (!runs[k] || runs[k]->done() || runs[k]->coarse() != coarse) continue;
-        RefineRun& r = *runs[k];
-        try {
-          r.update_object_pixels(*renderer_);
-        } catch (const std::exception& e) {
-          fail(k, e.what());
-          continue;
-        }
-        ObjectBatch b;
-        b.mesh = &r.mesh();
-        b.mask = r.observation().mask;
-        b.poses = r.batch();  // (before with_gradient() and loss(): a scan differs)
-        b.loss = r.loss();
-        batches.push_back(std::move(b));
-        which.push_back(k);
-        with_gradient = with_gradient || r.with_gradient();
-      }
-      if (batches.empty()) continue;
-      any = true;
-      const Camera& cam = runs[which[0]]->camera();  // the same scaled camera for every object of the phase
-      const Observation& images = coarse ? *coarse_frame : *shared_frame;
-      try {
-        renderer_->evaluate_objects(cam, images, batches, with_gradient, values);
-      } catch (const std::exception&) {
-        // One object's input broke the joint call: evaluate them one by one so only that object fails.
-        values.assign(which.size(), {});
-        for (size_t j = 0; j < which.size(); ++j) {
-          std::vector<std::vector<LossValue>> one;
-          try {
-            renderer_->evaluate_objects(cam, images, {batches[j]}, with_gradient, one);
-            values[j] = std::move(one[0]);
-          } catch (const std::exception& e) {
-            fail(which[j], e.what());
-          }
-        }
-      }
-      for (size_t j = 0; j < which.size(); ++j)
-        if (runs[which[j]]) {
-          runs[which[j]]->count_evaluations(long(batches[j].poses.size()));
-          runs[which[j]]->absorb(values[j], nullptr);
-        }
-    }
-  }
-  for (size_t k = 0; k < runs.size(); ++k) {
-    if (!runs[k]) continue;
-    try {
-      out[k] = runs[k]->finish(*renderer_);
-    } catch (const std::exception& e) {
-      fail(k, e.what());
-    }
-  }
+  if (!shared.fine) return out;  // every object has failed its check
+  std::vector<RefineResult> results = run_to_results(*renderer_, runs, shared, progress);
+  for (size_t k = 0; k < runs.size(); ++k)
+    if (out[k].error.empty()) out[k] = std::move(results[k]);
   return out;
 }
 
@@ -415,7 +447,7 @@ long planned_evaluations(const RefinerOptions& o) {
   long total = 0;
   int active = std::max(o.batch_size, 1), candidates = 0, halvings = 0;
   const int scan_at = scan_iteration(o);  // with as many turns as any shape gets
-  for (int k = 0; k <= o.iterations; ++k) {  // as RefineRun::batch(): k == iterations only evaluates
+  for (int k = 0; k <= o.iterations; ++k) {  // as RefineRun::next_step(): k == iterations only evaluates
     for (const int due = halvings_due(k, o.iterations); o.successive_halving && k < o.iterations && halvings < due;
          ++halvings)
       active = (active + 1) / 2, candidates = (candidates + 1) / 2;
