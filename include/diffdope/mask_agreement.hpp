@@ -1,13 +1,11 @@
 #pragma once
 // How well a given object mask (a segmenter's) agrees with the object's pixels that depth and colour show
 // (derive_object_pixels()): what the refiner measures to decide whether a mask's outline can be taken as given.
+#include "diffdope/refine_tuning.hpp"
 #include <opencv2/core.hpp>
 
 namespace diffdope {
 
-/// A pixel of the mask's outline counts at most this far (pixels) from the reference's: a blob, or a stretch of
-/// outline the depth cannot see (a dark or shiny edge, the foot on a table), weighs no more than a clear miss.
-constexpr double kOutlineOffsetCap = 3.0;
 
 /// The mean distance (pixels, each capped at kOutlineOffsetCap) from the outline of `mask` to the outline of
 /// `reference`, over the outline pixels within twice the cap of it: farther, the reference ran on into a

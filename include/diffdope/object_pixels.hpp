@@ -6,6 +6,7 @@
 #include <opencv2/core.hpp>
 #include <vector>
 
+#include "diffdope/refine_tuning.hpp"
 #include "diffdope/camera.hpp"
 #include "diffdope/renderer.hpp"
 
@@ -32,10 +33,6 @@ struct ObjectPixelsOptions {
   cv::Rect bounds;
 };
 
-/// The mask term's share of its weight (LossOptions::weight_mask) when the mask is derived, for an object or a
-/// robot: the derived silhouette is no independent observation, its pixels come from the depth the depth term
-/// already compares (and carry its noise), so it counts half (figures: docs/benchmarks.md, docs/calibration.md).
-constexpr double kDerivedMaskWeight = 0.5;
 
 /// The object's pixels (CV_32F in [0, 1]: 1 where depth shows it, a colour probability in holes) in `depth`
 /// (CV_32F metres, 0 = no reading; the camera's size), given renders of it at one or more estimates

@@ -6,6 +6,7 @@
 #include <string>
 #include <vector>
 
+#include "diffdope/refine_tuning.hpp"
 #include "diffdope/pose.hpp"
 #include "diffdope/refiner.hpp"
 #include "diffdope/symmetry.hpp"
@@ -53,9 +54,6 @@ StartKind start_kind(const std::vector<Seed>& starts);
 /// the camera plane.
 cv::Rect detector_box(const Camera& camera, const Mesh& mesh, const std::vector<Seed>& starts);
 
-/// Newton rounds at most on a frame of steady tracks: a track is a frame from the truth, and its steps take one
-/// or two rounds; the cap bounds the frame's time.
-constexpr int kTrackedNewtonRounds = 4;
 
 /// The refiner options for a frame whose targets all start from steady tracks (each start_kind() kTracked and
 /// ObjectTrack::steady()): `o` with its batch_size and iterations capped at TrackOptions' (where those are set),

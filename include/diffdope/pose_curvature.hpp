@@ -6,6 +6,7 @@
 #include <Eigen/Core>
 #include <vector>
 
+#include "diffdope/refine_tuning.hpp"
 #include "diffdope/camera.hpp"
 #include "diffdope/mesh.hpp"
 #include "diffdope/observation.hpp"
@@ -91,9 +92,6 @@ PoseCurvature probe_pose_curvature(Renderer& renderer, const std::vector<ProbeVi
                                    const Pose& pose, const Eigen::Vector3d& pivot_model, double distance,
                                    const std::vector<Vector6d>& free_twists = {});
 
-/// Neighbouring pixels' residuals are not independent (antialiasing, texture filtering, image resampling): the
-/// covariance counts one independent observation per this many pixels.
-constexpr double kCorrelatedPixels = 4.0;
 
 /// A covariance of the pose from the loss's curvature (a Laplace approximation). The loss, a mean of L1
 /// residuals over `pixels` object pixels, is read as the negative log-likelihood N · L / L* of Laplace noise

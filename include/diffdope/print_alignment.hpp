@@ -9,28 +9,14 @@
 #include <functional>
 #include <vector>
 
+#include "diffdope/refine_tuning.hpp"
 #include "diffdope/pose.hpp"
 #include "diffdope/renderer.hpp"
 #include "diffdope/shape_rotations.hpp"
 
 namespace diffdope {
 
-/// Angles tried: every kPrintCoarseStep within the range, then every kPrintFineStep within one coarse step of
-/// the best (radians; never beyond the range). 2.5 degrees move a 3 cm radius by 1.3 mm, under a pixel at
-/// working resolution. A range below kPrintCoarseStep searches nothing.
-constexpr double kPrintCoarseStep = 2.5 * M_PI / 180.0;
-constexpr double kPrintFineStep = 0.5 * M_PI / 180.0;
-/// Range about a tracked start (ObjectTarget::start_kind kTracked): the track was aligned on an earlier frame, so only
-/// the spin since then is sought. 10 degrees cover 100 deg/s at 10 refined frames/s, with 17 evaluations per
-/// axis instead of 41 at the default 0.7 rad (a third of a tracked refinement's time at 8 x 20).
-constexpr double kTrackedPrintSearch = 10.0 * M_PI / 180.0;
-/// A turn is kept when the texture term is lower there by more than this fraction of its value at the result,
-constexpr double kPrintMargin = 0.01;
-/// the refiner's own loss (silhouette, depth, colour) is at most this fraction higher,
-constexpr double kPrintLossTolerance = 0.02;
-/// and the texture term's relative gain is at least this many times the loss's relative rise (a print that
-/// barely registers better must not pay for it with the fit of everything else).
-constexpr double kPrintTradeoff = 2.0;
+// The alignment's steps, its range about a tracked start and its acceptance bars: refine_tuning.hpp.
 
 struct PrintAlignment {
   Pose pose;                  // the result: the input pose turned by `angle` about the axis

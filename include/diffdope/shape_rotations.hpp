@@ -8,6 +8,7 @@
 #include <optional>
 #include <vector>
 
+#include "diffdope/refine_tuning.hpp"
 #include "diffdope/pose.hpp"
 
 namespace diffdope {
@@ -28,10 +29,8 @@ struct ShapeRotation {
 };
 
 /// Every candidate the analysis tried: about each of the surface's three principal axes (second moments of an
-/// area-uniform sample), every multiple of kShapeAngleStep. Deterministic. Mesh::finalize() computes it once.
+/// area-uniform sample), every multiple of 360 / kShapeAngleSteps degrees. Deterministic. Mesh::finalize() computes it once.
 std::vector<ShapeRotation> analyse_shape_rotations(const Mesh& mesh);
-constexpr int kShapeAngleSteps = 12;  // multiples of 30 degrees
-constexpr int kMaxShapeTurns = 15;    // the refiner's scan: 11 turns about an axis of revolution and a few flips
 
 /// The rotations worth trying, at most `max_count`: about an axis where every multiple of 30 degrees is within
 /// `tolerance` (a shape of revolution), angles evenly spread over the turn (as many as fit in max_count, at

@@ -1,6 +1,7 @@
 #pragma once
 // Evidence for the refiner's verdict that a pose is right, beyond how well its silhouette and depth fit: whether
 // the object's print lines up with the image's.
+#include "diffdope/refine_tuning.hpp"
 #include <limits>
 #include <opencv2/core.hpp>
 
@@ -28,8 +29,6 @@ struct PrintRegistration {
   double significance() const;
 };
 
-/// Below this RMS texture gradient the model has no print to register (a plain object): not measured.
-constexpr double kMinPrintContrast = 0.05;
 
 /// `observed_rgb`, `rendered_rgb`: CV_32FC3 of one size (the render premultiplied by coverage); `interior`:
 /// CV_8U, nonzero where both the render covers the object fully and the observation shows it (the caller's
@@ -54,8 +53,6 @@ struct DepthAgreement {
   int readings = 0;         // the object's pixels with both an observed and a rendered depth (sigma1's sample)
 };
 
-/// Half-width of the inlier band in the noise's standard deviations: noise alone leaves 99.7 % inside (Gaussian).
-constexpr double kDepthNoiseBand = 3.0;
 
 /// `observed`, `rendered`: CV_32F depth (metres; <= 0 or NaN: no reading); `object`: CV_8U, nonzero where the
 /// object is (observed mask, derived pixels, or the render's coverage). min_band, max_noise_at_1m in metres.
@@ -79,9 +76,6 @@ struct Verdict {
   bool plausible = false;  // judged, and every available evidence passes its threshold
 };
 
-/// Standard deviations above its chance level at which a print's registration is clear evidence on its own: the
-/// usual bar of a significant peak, not fitted to any data.
-constexpr double kClearPrint = 3.0;
 
 /// Thresholds as in RefinerOptions: min_mask_iou, min_depth_inliers (fractions in [0, 1]) and
 /// min_print_significance (standard deviations; 0 = the print is not weighed). A print below its bar contradicts

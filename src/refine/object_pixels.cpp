@@ -21,13 +21,6 @@ struct Plane {
   double distance(const Eigen::Vector3d& p) const { return std::abs(normal.dot(p) + offset); }
 };
 
-/// A surface is a plane found by RANSAC when at least kPlaneNormalShare of its points face as it does, within
-/// kPlaneNormalAngle (radians), their faces measured kNormalBaseline (metres) to each side: nearly all of a
-/// plane's points face as it does, few of a slab's through other surfaces; a centimetre averages a sensor's
-/// noise.
-constexpr double kPlaneNormalShare = 0.5;
-constexpr double kPlaneNormalAngle = 30.0 * 3.14159265358979323846 / 180.0;
-constexpr double kNormalBaseline = 0.01;
 
 /// Least-squares plane through `points` (the eigenvector of the smallest scatter).
 Plane fit_plane(const std::vector<Eigen::Vector3d>& points) {
@@ -76,9 +69,7 @@ Plane dominant_plane(const std::vector<Eigen::Vector3d>& points, double toleranc
 
 /// Colour histograms of the object's pixels and of the background's, kColourBins per channel, and in each pixel
 /// of `holes` the probability that its colour is the object's (equal priors; a colour neither histogram holds
-/// counts one in each, so it stays at a half). 16 bins of RGB keep an object's print apart from a table's
-/// grain while a few thousand pixels still fill the bins that matter.
-constexpr int kColourBins = 16;
+/// counts one in each, so it stays at a half).
 void colour_holes(const cv::Mat& rgb, const cv::Mat& object, const cv::Mat& background, const cv::Mat& holes,
                   cv::Mat& out) {
   const auto bin = [](const cv::Vec3f& c) {
@@ -142,20 +133,16 @@ int pixels_at(const Camera& camera, double metres, double z) {
   return std::clamp(int(std::ceil(metres * std::max(camera.fx, camera.fy) / std::max(z, 0.05))), 1, 200);
 }
 
-/// derive_object_pixels() within a window of the image: `camera` is the window's (its principal point shifted),
-/// the images are the window's parts; `min_points` is 0.5 % of the whole image's quarter (the planes' least
-/// support), `bounds` in the window's pixels.
-cv::Mat pixels_in_window(const Camera& camera, const cv::Mat& d, const std::vector<cv::Mat>& depth,
-                         const std::vector<cv::Mat>& covered, const cv::Mat& covered_any, double z_near,
-                         const ObjectPixelsOptions& options, const cv::Rect& bounds, const cv::Mat& rgb,
-                         size_t min_points) {
+/// The observed pixels within reach of the renders: around each (`margin` metres, as pixels at z_near), at the
+/// depths it shows there give or take the margin. An occluder in front of the object, or a wall behind it, lies
+/// outside that depth range. `within_reach` gets the renders' neighbourhoods.
+cv::Mat pixels_within_reach(const Camera& camera, const cv::Mat& d, const std::vector<cv::Mat>& depth,
+                            const std::vector<cv::Mat>& covered, double z_near, double margin, cv::Mat& within_reach) {
   const cv::Size size(camera.width, camera.height);
-  // Within reach: around each render, at the depths it shows there give or take the margin. An occluder in front
-  // of the object, or a wall behind it, lies outside that depth range.
-  const double margin = options.margin;
   const int radius = pixels_at(camera, margin, z_near);
   const cv::Mat kernel = cv::getStructuringElement(cv::MORPH_RECT, cv::Size(2 * radius + 1, 2 * radius + 1));
-  cv::Mat mask = cv::Mat::zeros(size, CV_8U), within_reach = cv::Mat::zeros(size, CV_8U);
+  cv::Mat mask = cv::Mat::zeros(size, CV_8U);
+  within_reach = cv::Mat::zeros(size, CV_8U);
   for (size_t i = 0; i < depth.size(); ++i) {
     cv::Mat nearest = depth[i].clone(), farthest = depth[i].clone();
     nearest.setTo(std::numeric_limits<float>::infinity(), ~covered[i]);
@@ -166,18 +153,17 @@ cv::Mat pixels_in_window(const Camera& camera, const cv::Mat& d, const std::vect
     within_reach |= reach;
     mask |= (d > 0) & (d >= nearest - margin) & (d <= farthest + margin) & reach;
   }
+  return mask;
+}
 
-  // Surfaces beside the object: planes of the depth where the object cannot be, each followed into its reach by
-  // connectivity (a table runs under the object, a box's side continues past it). Their pixels leave the mask
-  // unless a render is there at that depth (the object's foot on the table). A plane must cover 0.5 % of the
-  // image; the RANSAC tolerance (2 cm) admits a sensor's noise at a few metres, and what is removed is what lies
-  // within 3 sigma of the plane's own spread (at least 5 mm).
-  cv::Mat search = ~within_reach, around = cv::Mat(size, CV_8U, cv::Scalar(255));
-  if (options.surface_search > 0) {
-    const int ring = pixels_at(camera, options.surface_search, z_near);
-    cv::dilate(within_reach, around, cv::getStructuringElement(cv::MORPH_RECT, cv::Size(2 * ring + 1, 2 * ring + 1)));
-    search &= around;
-  }
+/// Surfaces beside the object: planes of the depth where the object cannot be (`search`), each followed into its
+/// reach by connectivity (a table runs under the object, a box's side continues past it). Their pixels leave
+/// `mask` unless a render is there at that depth (the object's foot on the table). A plane needs `min_points`
+/// sampled points (every second pixel); kPlaneTolerance, kPlaneBandSigmas and kMinPlaneBand say what is removed.
+void remove_planes(const Camera& camera, const cv::Mat& d, const std::vector<cv::Mat>& depth,
+                   const std::vector<cv::Mat>& covered, const cv::Mat& within_reach, const cv::Mat& search,
+                   double z_near, size_t min_points, cv::Mat& mask) {
+  const cv::Size size(camera.width, camera.height);
   // The observed points (camera frame), once; z = 0 where there is no reading.
   std::vector<Eigen::Vector3d> cloud(size_t(camera.width) * size_t(camera.height), Eigen::Vector3d::Zero());
   for (int y = 0; y < camera.height; ++y)
@@ -193,10 +179,10 @@ cv::Mat pixels_in_window(const Camera& camera, const cv::Mat& d, const std::vect
   for (int y = 0; y < camera.height; y += 2)
     for (int x = 0; x < camera.width; x += 2)
       if (point(x, y).z() > 0 && search.at<uchar>(y, x)) outside.push_back(point(x, y));
-  const double tolerance = 0.02;
+  const double tolerance = kPlaneTolerance;
   const int normal_step = std::max(2, pixels_at(camera, kNormalBaseline, z_near));
   std::mt19937 rng(1);
-  for (int k = 0; k < 6 && outside.size() >= std::max<size_t>(min_points, 3); ++k) {
+  for (int k = 0; k < kMaxPlanes && outside.size() >= std::max<size_t>(min_points, 3); ++k) {
     const Plane plane = dominant_plane(outside, tolerance, rng);
     std::vector<double> residuals;
     std::vector<Eigen::Vector3d> rest;
@@ -212,7 +198,7 @@ cv::Mat pixels_in_window(const Camera& camera, const cv::Mat& d, const std::vect
     // RANSAC also finds slabs through other surfaces (a cylinder's flank seen edge-on, with the floor and the
     // object beside it): no plane, and its band would cut the object's end away.
     if (normal_agreement(plane, search, point, tolerance, normal_step) < kPlaneNormalShare) continue;
-    const double band = std::clamp(3 * spread, 0.005, tolerance);
+    const double band = std::clamp(kPlaneBandSigmas * spread, kMinPlaneBand, tolerance);
     cv::Mat on_plane = cv::Mat::zeros(size, CV_8U);
     for (int y = 0; y < camera.height; ++y)
       for (int x = 0; x < camera.width; ++x)
@@ -228,6 +214,25 @@ cv::Mat pixels_in_window(const Camera& camera, const cv::Mat& d, const std::vect
         if (!rendered_there) mask.at<uchar>(y, x) = 0;
       }
   }
+}
+
+/// derive_object_pixels() within a window of the image: `camera` is the window's (its principal point shifted),
+/// the images are the window's parts; `min_points` is kMinPlaneShare of the whole image's quarter (the planes'
+/// least support), `bounds` in the window's pixels.
+cv::Mat pixels_in_window(const Camera& camera, const cv::Mat& d, const std::vector<cv::Mat>& depth,
+                         const std::vector<cv::Mat>& covered, const cv::Mat& covered_any, double z_near,
+                         const ObjectPixelsOptions& options, const cv::Rect& bounds, const cv::Mat& rgb,
+                         size_t min_points) {
+  const cv::Size size(camera.width, camera.height);
+  cv::Mat within_reach;
+  cv::Mat mask = pixels_within_reach(camera, d, depth, covered, z_near, options.margin, within_reach);
+  cv::Mat search = ~within_reach, around = cv::Mat(size, CV_8U, cv::Scalar(255));
+  if (options.surface_search > 0) {
+    const int ring = pixels_at(camera, options.surface_search, z_near);
+    cv::dilate(within_reach, around, cv::getStructuringElement(cv::MORPH_RECT, cv::Size(2 * ring + 1, 2 * ring + 1)));
+    search &= around;
+  }
+  remove_planes(camera, d, depth, covered, within_reach, search, z_near, min_points, mask);
   cv::Mat inside_bounds(size, CV_8U, cv::Scalar(255));
   if (!bounds.empty()) {
     inside_bounds.setTo(0);
@@ -299,7 +304,7 @@ cv::Mat derive_object_pixels(const Camera& camera, const cv::Mat& d, const std::
   if (!options.bounds.empty() && bounds.empty()) return cv::Mat::zeros(size, CV_32F);
   cv::Mat out = cv::Mat::zeros(size, CV_32F);
   pixels_in_window(inside, d(window), depth, covered_in, covered_any(window), z_near, options, bounds,
-                   rgb.empty() ? cv::Mat() : rgb(window), size_t(0.005 * camera.width * camera.height / 4))
+                   rgb.empty() ? cv::Mat() : rgb(window), size_t(kMinPlaneShare * camera.width * camera.height / 4))
       .copyTo(out(window));
   return out;
 }

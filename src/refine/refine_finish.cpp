@@ -17,12 +17,13 @@ namespace diffdope {
 PrintRegistration RefineRun::register_render(const RenderImage& img) const {
   const Observation& obs = fine_[0].obs;
   if (meshes_.size() != 1 || !obs.has_rgb()) return PrintRegistration();
-  // The object's interior where the observation shows it: 2 px inside the render's full coverage (the
-  // silhouette's gradients fit whenever the shape does) and, with a mask, inside the observed mask.
+  // The object's interior where the observation shows it: inside the render's full coverage
+  // (kPrintInteriorMargin) and, with a mask, inside the observed mask.
   cv::Mat interior = img.coverage >= 0.999f;
   if (has_mask_) interior &= cv::Mat(obs.mask >= 0.5f);
-  cv::erode(interior, interior, cv::getStructuringElement(cv::MORPH_RECT, cv::Size(5, 5)));
-  return register_print(obs.rgb, img.color, interior, 8, loss_.texture_epsilon);
+  const int side = 2 * kPrintInteriorMargin + 1;
+  cv::erode(interior, interior, cv::getStructuringElement(cv::MORPH_RECT, cv::Size(side, side)));
+  return register_print(obs.rgb, img.color, interior, kPrintShiftRadius, loss_.texture_epsilon);
 }
 
 double RefineRun::print_significance(Renderer& renderer, const Pose& pose) {
@@ -82,6 +83,19 @@ void RefineRun::polish(Renderer& renderer, RefineResult& res) {
   }
 }
 
+double RefineRun::residual_count(Renderer& renderer, const Pose& pose) {
+  // The pixels the loss compares at `pose` (the observed mask, or without one the window about the start, and
+  // the render), in every view.
+  double pixels = 0;
+  for (size_t v = 0; v < meshes_.size(); ++v) {
+    const cv::Mat& mask = fine_[v].obs.mask;
+    const RenderImage img = renderer.render(fine_[v].cam, *meshes_[v], {pose}, mask)[0];
+    ++evaluations_;
+    pixels += cv::countNonZero((mask >= 0.5f) | (img.coverage >= 0.5f));
+  }
+  return std::max(1.0, pixels / kCorrelatedPixels);
+}
+
 void RefineRun::newton(Renderer& renderer, RefineResult& res) {
   if (newton_rounds_ <= 0 || options_.iterations == 0 || !std::isfinite(res.loss.total)) return;
   Matrix6d metric = Matrix6d::Zero();
@@ -89,16 +103,7 @@ void RefineRun::newton(Renderer& renderer, RefineResult& res) {
   const Eigen::LLT<Matrix6d> llt(metric / double(meshes_.size()));
   if (llt.info() != Eigen::Success) return;
   const Matrix6d L = llt.matrixL(), Linv = L.inverse(), LinvT = Linv.transpose();
-  // The noise model's residual count: the pixels the loss compares at the result (the observed mask, or without
-  // one the window about the start, and the render), in every view.
-  double pixels = 0;
-  for (size_t v = 0; v < meshes_.size(); ++v) {
-    const cv::Mat& mask = fine_[v].obs.mask;
-    const RenderImage img = renderer.render(fine_[v].cam, *meshes_[v], {res.pose}, mask)[0];
-    ++evaluations_;
-    pixels += cv::countNonZero((mask >= 0.5f) | (img.coverage >= 0.5f));
-  }
-  const double residuals = std::max(1.0, pixels / kCorrelatedPixels);
+  const double residuals = residual_count(renderer, res.pose);
   // The first probe reaches one working pixel at the object's distance: the scale below which the plain steps'
   // hopping and the antialiased silhouette blur the loss. The trust radius is twice the probe's reach: a round
   // whose whole step was held back by it (the loss's valley goes on) doubles both, up to a quarter of the
@@ -106,7 +111,7 @@ void RefineRun::newton(Renderer& renderer, RefineResult& res) {
   // ends the steps, unless the reach had grown: it is then tried again at half.
   const Camera& cam = fine_[0].cam;
   const double first_reach = (res.pose * pivot_model_).z() / std::max(cam.fx, cam.fy);
-  const double max_reach = std::max(first_reach, 0.25 * diameter_);
+  const double max_reach = std::max(first_reach, kNewtonMaxReach * diameter_);
   double h = first_reach;
   std::vector<Vector6d> free;  // a declared symmetry's free twists, whitened (as the curvature probe leaves out)
   if (meshes_.size() == 1)
@@ -118,7 +123,7 @@ void RefineRun::newton(Renderer& renderer, RefineResult& res) {
     evaluate(renderer, secant_probe_poses(res.pose, LinvT, h, pivot), loss_, true, v, true);
     const bool probed = std::all_of(v.begin(), v.end(), [](const LossValue& x) { return std::isfinite(x.total); });
     Vector6d step = Vector6d::Zero();  // (zero: a probe left the image, or nothing curves upwards)
-    const double trust = 2 * h;
+    const double trust = kNewtonTrustPerReach * h;
     if (probed) {
       for (int k = 0; k < kSecantProbePoses; ++k) gradients[size_t(k)] = gradient_about(v[size_t(k)].gradient, pivot);
       step = newton_step(secant_hessian(gradients, Linv, h), Linv * gradients.back(), trust, free);
@@ -127,7 +132,7 @@ void RefineRun::newton(Renderer& renderer, RefineResult& res) {
     size_t best = 0;
     double gain = 0;
     if (!step.isZero()) {
-      for (const double share : {0.25, 0.5, 1.0}) poses.push_back(twist_about(res.pose, share * (LinvT * step), pivot));
+      for (const double share : kNewtonStepShares) poses.push_back(twist_about(res.pose, share * (LinvT * step), pivot));
       evaluate(renderer, poses, loss_, false, tried, true);
       for (size_t j = 1; j < poses.size(); ++j)
         if (std::isfinite(tried[j].total) && !(tried[best].total <= tried[j].total)) best = j;  // (never a non-finite one)
@@ -162,51 +167,69 @@ void RefineRun::take(RefineResult& res, int i) const {
   res.history = res.run_histories[size_t(i)];
 }
 
-double RefineRun::ResultPrint::at(Renderer& renderer, const RefineResult& res) {
-  if (!known) z = run.print_significance(renderer, res.pose), known = true;
+namespace {
+bool same_pose(const Pose& a, const Pose& b) { return a.R == b.R && a.t == b.t; }
+}  // namespace
+
+double RefineRun::PrintAtPose::at(Renderer& renderer, const Pose& pose) {
+  if (pixels != run.pixels_version_ || !same_pose(pose, measured)) set(pose, run.print_significance(renderer, pose));
   return z;
 }
 
+void RefineRun::PrintAtPose::set(const Pose& pose, double significance) {
+  measured = pose;
+  pixels = run.pixels_version_;
+  z = significance;
+}
+
 RefineResult RefineRun::finish(Renderer& renderer) {
+  RefineResult res = start_result();
+  if (switch_at_ > 0) weigh_starts(renderer, res);
+  PrintAtPose print{*this};
+  weigh_candidate(renderer, res, print);
+  derive_pixels_at_result(renderer, res);
+  polish(renderer, res);
+  align_print_and_step(renderer, res, print);
+  // Of the poses a declared symmetry makes equivalent, the one nearest the start: a track does not spin.
+  if (meshes_.size() == 1) res.pose = meshes_.front()->symmetry.nearest_equivalent(res.pose, res.initial_pose.R);
+  judge_result(renderer, res, score_views(renderer, res));
+  return res;
+}
+
+RefineResult RefineRun::start_result() {
   RefineResult res = std::move(res_);
   const int runs = int(best_.size());
   res.run_losses.resize(size_t(runs));
   for (int i = 0; i < runs; ++i) res.run_losses[size_t(i)] = best_[size_t(i)].total;
   res.run_poses = best_pose_;
   take(res, lowest(res, 0, options_.batch_size));  // the start's own basin
-  if (switch_at_ > 0) weigh_starts(renderer, res);
-  ResultPrint print{*this};
-  weigh_candidate(renderer, res, print);
-  if (derives_pixels_ && std::isfinite(res.loss.total) &&
-      derive_pixels(renderer, {res.pose}, options_.inlier_threshold)) {
-    // The object's pixels about the chosen result, within what the verdict calls an inlier: the polish, the
-    // print alignment, the Newton steps and the scores weigh them. Losses under other pixels do not compare: the
-    // result's and the starts' again (a start no run beat stays the result).
-    std::vector<LossValue> v;
-    evaluate(renderer, {res.pose}, loss_, false, v, true);
-    res.loss = v[0];
-    weigh_starts(renderer, res);
-    print.known = false;
-  }
-  const Pose before_polish = res.pose;
-  polish(renderer, res);
-  if (!(res.pose.R == before_polish.R && res.pose.t == before_polish.t)) print.known = false;  // measured elsewhere
-  align_result_print(renderer, res, print);
-  const double aligned_loss = res.loss.total;
-  newton(renderer, res);
-  if (res.loss.total < (1.0 - kPrintLossTolerance) * aligned_loss) {
-    // The steps went on well past what the alignment compared its turns against: it weighed the turns of a
-    // result that was not yet converged. Once more from the converged one.
-    const Pose converged = res.pose;
-    print.known = false;
-    align_result_print(renderer, res, print);
-    if (!(res.pose.R == converged.R && res.pose.t == converged.t)) newton(renderer, res);
-  }
-  // Of the poses a declared symmetry makes equivalent, the one nearest the start: a track does not spin.
-  if (meshes_.size() == 1) res.pose = meshes_.front()->symmetry.nearest_equivalent(res.pose, res.initial_pose.R);
-  const int rendered_pixels = score_views(renderer, res);
-  judge_result(renderer, res, rendered_pixels);
   return res;
+}
+
+void RefineRun::derive_pixels_at_result(Renderer& renderer, RefineResult& res) {
+  if (!derives_pixels_ || !std::isfinite(res.loss.total) ||
+      !derive_pixels(renderer, {res.pose}, options_.inlier_threshold))
+    return;
+  // The object's pixels about the chosen result, within what the verdict calls an inlier: the polish, the print
+  // alignment, the Newton steps and the scores weigh them. Losses under other pixels do not compare: the result's
+  // and the starts' again (a start no run beat stays the result).
+  std::vector<LossValue> v;
+  evaluate(renderer, {res.pose}, loss_, false, v, true);
+  res.loss = v[0];
+  weigh_starts(renderer, res);
+}
+
+void RefineRun::align_print_and_step(Renderer& renderer, RefineResult& res, PrintAtPose& print) {
+  for (int pass = 0; pass < kAlignmentPasses; ++pass) {
+    const Pose before = res.pose;
+    align_result_print(renderer, res, print);
+    if (pass > 0 && same_pose(res.pose, before)) return;  // nothing turned: the steps have converged there
+    const double aligned_loss = res.loss.total;
+    newton(renderer, res);
+    // Steps that went on well past what the alignment compared its turns against: it weighed the turns of a
+    // result that was not yet converged. Once more from the converged one.
+    if (!(res.loss.total < (1.0 - kPrintLossTolerance) * aligned_loss)) return;
+  }
 }
 
 void RefineRun::weigh_starts(Renderer& renderer, RefineResult& res) {
@@ -230,7 +253,7 @@ void RefineRun::weigh_starts(Renderer& renderer, RefineResult& res) {
   }
 }
 
-void RefineRun::weigh_candidate(Renderer& renderer, RefineResult& res, ResultPrint& print) {
+void RefineRun::weigh_candidate(Renderer& renderer, RefineResult& res, PrintAtPose& print) {
   // A shape-scan candidate replaces the start's basin only when, both converged, the evidence is clear enough
   // for how far it jumps (jump_is_supported): silhouette and depth barely tell such turns apart.
   const int candidate = lowest(res, options_.batch_size, int(best_.size()));
@@ -240,17 +263,17 @@ void RefineRun::weigh_candidate(Renderer& renderer, RefineResult& res, ResultPri
     take(res, candidate);  // every run from the starts left the image: the candidate is all there is
     res.scan_taken = true;
   } else if (std::isfinite(res.loss.total) && candidate_loss < res.loss.total) {
-    const JumpEvidence basin{res.loss.total, print.at(renderer, res)};
+    const JumpEvidence basin{res.loss.total, print.at(renderer, res.pose)};
     const JumpEvidence jump{candidate_loss, print_significance(renderer, best_pose_[size_t(candidate)])};
     if (jump_is_supported(basin, jump, jump_angle_[size_t(candidate)], options_.min_print_significance > 0)) {
       take(res, candidate);
       res.scan_taken = true;
-      print.z = jump.print, print.known = true;
+      print.set(res.pose, jump.print);
     }
   }
 }
 
-void RefineRun::align_result_print(Renderer& renderer, RefineResult& res, ResultPrint& print) {
+void RefineRun::align_result_print(Renderer& renderer, RefineResult& res, PrintAtPose& print) {
   // The turn may cost up to kPrintLossTolerance of loss only because a mask or depth holds every other degree of
   // freedom: with RGB alone that loss is the print comparison itself, and a turn that moves the handle (unseen
   // without a mask) to where the print fits slightly better would be taken 30-40 degrees from the truth.
@@ -278,11 +301,11 @@ void RefineRun::align_result_print(Renderer& renderer, RefineResult& res, Result
   // registration must not contradict the turn, and must register where it turned (turn_is_supported).
   if (!(v[0].total <= (1.0 + kPrintLossTolerance) * res.loss.total)) return;
   const double z_aligned = print_significance(renderer, aligned);
-  if (!turn_is_supported(print.at(renderer, res), z_aligned, options_.min_print_significance)) return;
+  if (!turn_is_supported(print.at(renderer, res.pose), z_aligned, options_.min_print_significance)) return;
   res.print_turn += angle;
   res.pose = aligned;
   res.loss = v[0];
-  print.z = z_aligned, print.known = true;
+  print.set(aligned, z_aligned);
 }
 
 int RefineRun::score_views(Renderer& renderer, RefineResult& res) {
@@ -352,10 +375,10 @@ void RefineRun::judge_result(Renderer& renderer, RefineResult& res, int rendered
     evaluations_ += long(kCurvatureProbeEvaluations * meshes_.size());
   res.pivot = res.pose * pivot_model_;
   res.covariance = pose_covariance(res.curvature, rendered_pixels, diameter_);
-  const size_t n = res.history.size(), tail = std::max<size_t>(2, n / 10);
+  const size_t n = res.history.size(), tail = std::max<size_t>(2, n / kConvergedTailDivisor);
   if (n >= tail) {
     const double a = res.history[n - tail], b = res.history.back();
-    res.converged = std::abs(a - b) <= 0.01 * std::max(std::abs(a), 1e-12);
+    res.converged = std::abs(a - b) <= kConvergedChange * std::max(std::abs(a), 1e-12);
   }
   VerdictEvidence evidence;
   evidence.mask_iou = res.mask_iou;

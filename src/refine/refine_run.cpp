@@ -32,16 +32,14 @@ cv::Mat window_mask(const Camera& cam, const Mesh& mesh, const Pose& pose, doubl
   return m;
 }
 
-/// Where a detector's box lets the object's pixels be: the box grown by kBoxSlack of its size on every side, and
-/// by a pixel (a detector's box is seldom exact to the pixel; at a coarser scale its rounding grows it too).
-constexpr double kBoxSlack = 0.05;
+/// Where a detector's box lets the object's pixels be (kBoxSlack).
 cv::Rect search_box(const cv::Rect& box) {
   const int gx = int(std::ceil(kBoxSlack * box.width)) + 1, gy = int(std::ceil(kBoxSlack * box.height)) + 1;
   return cv::Rect(box.x - gx, box.y - gy, box.width + 2 * gx, box.height + 2 * gy);
 }
 
-/// An initial pose whose object is outside the image, or projects smaller than a couple of pixels at the
-/// refining scale, has nothing to be refined against: a refinement would only "converge" on noise.
+/// An initial pose whose object is outside the image, or projects smaller than kMinProjectedPixels at the
+/// refining scale, has nothing to be refined against.
 void check_in_view(const Camera& cam, const Mesh& mesh, const Pose& pose, double near_plane) {
   if (mesh.content_id() == 0) return;  // not finalized: the renderer says so
   std::vector<Eigen::Vector3d> corners = mesh.bbox_corners();
@@ -57,21 +55,19 @@ void check_in_view(const Camera& cam, const Mesh& mesh, const Pose& pose, double
   }
   const double z = (pose * mesh.center()).z();
   const double pixels = mesh.diameter() * std::max(cam.fx, cam.fy) / z;
-  if (pixels < 2.0) {
+  if (pixels < kMinProjectedPixels) {
     m << "refine: at the initial pose the object is " << pixels << " pixels across at the refining scale (z = "
-      << z << " m); at least 2 are needed";
+      << z << " m); at least " << kMinProjectedPixels << " are needed";
     throw std::invalid_argument(m.str());
   }
 }
 
-}  // namespace
-
-RefineRun::RefineRun(const RefinerOptions& o, const std::vector<RefineView>& views, const std::vector<Pose>& initials,
-                     std::vector<Pose> shape_turns, const Observation* scaled_frame, const Observation* coarse_frame,
-                     const Eigen::Vector3d* pivot_model)
-    : options_(o), start_time_(std::chrono::steady_clock::now()), initials_(initials), turns_(std::move(shape_turns)) {
+/// The checks of RefineRun's input that need no images resized: views, meshes, starts in front of the camera and
+/// in view. Throws std::invalid_argument naming the view (of several) that fails.
+void validate_views(const RefinerOptions& o, const std::vector<RefineView>& views, const std::vector<Pose>& initials,
+                    bool shares_frames) {
   if (views.empty()) throw std::invalid_argument("refine: no view");
-  if (views.size() > 1 && (scaled_frame || coarse_frame)) throw std::logic_error("RefineRun: shared frames of one view");
+  if (views.size() > 1 && shares_frames) throw std::logic_error("RefineRun: shared frames of one view");
   if (initials.empty()) throw std::invalid_argument("refine: no initial pose");
   const bool given_mask = views.front().observed.has_mask();
   for (size_t v = 0; v < views.size(); ++v) {
@@ -83,7 +79,6 @@ RefineRun::RefineRun(const RefinerOptions& o, const std::vector<RefineView>& vie
       throw std::invalid_argument("refine: need at least an rgb or a depth image" + which);
     if (view.observed.has_mask() != given_mask)
       throw std::invalid_argument("refine: either every view has a mask or none" + which);
-    meshes_.push_back(view.mesh);
     for (const Pose& initial : initials) {
       if (!initial.is_valid(1e-4))
         throw std::invalid_argument("refine: initial pose is not finite or its rotation is not orthonormal");
@@ -97,39 +92,62 @@ RefineRun::RefineRun(const RefinerOptions& o, const std::vector<RefineView>& vie
       check_in_view(scaled_camera(view.camera, o.image_scale), *view.mesh, initial, o.render.near_plane);
     }
   }
-  const Pose& initial = initials.front();
-  const int starts = int(initials.size());
+}
 
+}  // namespace
+
+RefineRun::RefineRun(const RefinerOptions& o, const std::vector<RefineView>& views, const std::vector<Pose>& initials,
+                     std::vector<Pose> shape_turns, const Observation* scaled_frame, const Observation* coarse_frame,
+                     const Eigen::Vector3d* pivot_model)
+    : options_(o), start_time_(std::chrono::steady_clock::now()), initials_(initials), turns_(std::move(shape_turns)) {
+  validate_views(o, views, initials, scaled_frame || coarse_frame);
+  for (const RefineView& view : views) meshes_.push_back(view.mesh);
   loss_ = o.loss;
-  // The images at each scale: the frame's shared ones (refine_all) or resized here, this object's mask resized,
-  // and without a mask a window around the initial projections (the mask term then has no observation).
-  const auto make_level = [&](const RefineView& view, double scale, const Observation* shared, bool fine) {
-    const Observation& observed = view.observed;
-    const Mesh& mesh = *view.mesh;
-    Level l;
-    l.cam = scaled_camera(view.camera, scale);
-    if (shared) {
-      const Observation own = Observation().with_mask(observed.mask);
-      l.obs = shared->with_mask(scale == 1.0 ? own.mask : own.resized(l.cam).mask,
-                                scaled_box(observed.box, cv::Size(view.camera.width, view.camera.height),
-                                           cv::Size(l.cam.width, l.cam.height)));
-    } else {
-      l.obs = scale == 1.0 ? observed : observed.resized(l.cam);
-    }
-    // The paper's edge term: Canny edges of the observed image, computed at this scale.
-    if (loss_.weight_edges > 0 && l.obs.has_rgb() && !l.obs.has_edges()) l.obs.edges = observed_edges(l.obs.rgb);
-    if (uses_texture(o, fine) && l.obs.has_rgb() && !l.obs.has_texture())
-      l.obs.texture = observed_texture(l.obs.rgb, loss_.texture_epsilon);
-    if (!l.obs.has_mask() && l.obs.has_box()) {
-      l.obs.mask = cv::Mat::zeros(l.cam.height, l.cam.width, CV_32F);
-      l.obs.mask(search_box(l.obs.box) & cv::Rect(0, 0, l.cam.width, l.cam.height)).setTo(1.0);
-    } else if (!l.obs.has_mask()) {
-      l.obs.mask = window_mask(l.cam, mesh, initial, o.no_mask_window);
-      for (int j = 1; j < starts; ++j) l.obs.mask = cv::max(l.obs.mask, window_mask(l.cam, mesh, initials[j], o.no_mask_window));
-    }
-    return l;
-  };
+  set_up_levels(views, scaled_frame, coarse_frame);
+  set_up_loss(views);
+  pivot_model_ = pivot_model ? *pivot_model : meshes_.front()->center();
+  diameter_ = 1e-6;
+  for (const Mesh* m : meshes_) diameter_ = std::max(diameter_, m->diameter());
+  if (!turns_.empty()) scan_at_ = scan_iteration(o);
+  start_runs();
+}
+
+RefineRun::Level RefineRun::make_level(const RefineView& view, double scale, const Observation* shared,
+                                       bool fine) const {
+  const Observation& observed = view.observed;
+  Level l;
+  l.cam = scaled_camera(view.camera, scale);
+  if (shared) {  // the frame's images (refine_all), this object's mask resized
+    const Observation own = Observation().with_mask(observed.mask);
+    l.obs = shared->with_mask(scale == 1.0 ? own.mask : own.resized(l.cam).mask,
+                              scaled_box(observed.box, cv::Size(view.camera.width, view.camera.height),
+                                         cv::Size(l.cam.width, l.cam.height)));
+  } else {
+    l.obs = scale == 1.0 ? observed : observed.resized(l.cam);
+  }
+  // The paper's edge term: Canny edges of the observed image, computed at this scale.
+  if (loss_.weight_edges > 0 && l.obs.has_rgb() && !l.obs.has_edges()) l.obs.edges = observed_edges(l.obs.rgb);
+  if (uses_texture(options_, fine) && l.obs.has_rgb() && !l.obs.has_texture())
+    l.obs.texture = observed_texture(l.obs.rgb, loss_.texture_epsilon);
+  // Without a mask: the detector's box, or a window around the initial projections (the mask term then has no
+  // observation).
+  if (!l.obs.has_mask() && l.obs.has_box()) {
+    l.obs.mask = cv::Mat::zeros(l.cam.height, l.cam.width, CV_32F);
+    l.obs.mask(search_box(l.obs.box) & cv::Rect(0, 0, l.cam.width, l.cam.height)).setTo(1.0);
+  } else if (!l.obs.has_mask()) {
+    const double grow = options_.no_mask_window;
+    l.obs.mask = window_mask(l.cam, *view.mesh, initials_.front(), grow);
+    for (size_t j = 1; j < initials_.size(); ++j)
+      l.obs.mask = cv::max(l.obs.mask, window_mask(l.cam, *view.mesh, initials_[j], grow));
+  }
+  return l;
+}
+
+void RefineRun::set_up_levels(const std::vector<RefineView>& views, const Observation* scaled_frame,
+                              const Observation* coarse_frame) {
+  const RefinerOptions& o = options_;
   switch_at_ = coarse_iterations(o);
+  const bool given_mask = views.front().observed.has_mask();
   for (const RefineView& view : views) {
     fine_.push_back(make_level(view, o.image_scale, scaled_frame, true));
     if (given_mask && cv::countNonZero(fine_.back().obs.mask > 0) == 0)
@@ -138,6 +156,11 @@ RefineRun::RefineRun(const RefinerOptions& o, const std::vector<RefineView>& vie
                                                    : "refine: the object mask is empty");
     if (switch_at_ > 0) coarse_.push_back(make_level(view, o.image_scale * o.coarse_scale, coarse_frame, false));
   }
+}
+
+void RefineRun::set_up_loss(const std::vector<RefineView>& views) {
+  const RefinerOptions& o = options_;
+  const bool given_mask = views.front().observed.has_mask();
   // Without a mask the object's pixels are derived from depth (one view), or the window stands in for them, which
   // is not an observation of the silhouette. With a mask the first derivation checks it (update_object_pixels()).
   derives_pixels_ = o.derive_mask && views.size() == 1 && views.front().observed.has_depth();
@@ -156,14 +179,15 @@ RefineRun::RefineRun(const RefinerOptions& o, const std::vector<RefineView>& vie
   res_.loss_used = loss_;
   if (!any_depth) res_.loss_used.weight_depth = 0;
   if (!any_rgb) res_.loss_used.weight_rgb = res_.loss_used.weight_edges = res_.loss_used.weight_texture = 0;
-  pivot_model_ = pivot_model ? *pivot_model : meshes_.front()->center();
   scan_loss_ = loss_;
   scan_loss_.weight_texture += o.explore_texture_weight;
-  if (!turns_.empty()) scan_at_ = scan_iteration(o);
+}
 
-  const int B = o.batch_size;
+void RefineRun::start_runs() {
+  const RefinerOptions& o = options_;
+  const int B = o.batch_size, starts = int(initials_.size());
   std::mt19937_64 rng(o.seed);
-  res_.initial_pose = initial;
+  res_.initial_pose = initials_.front();
   res_.learning_rates.resize(B);
   std::uniform_real_distribution<double> U(0.0, 1.0);
   for (int i = 0; i < B; ++i) {
@@ -172,17 +196,14 @@ RefineRun::RefineRun(const RefinerOptions& o, const std::vector<RefineView>& vie
                                               : o.lr_low + (o.lr_high - o.lr_low) * u;
   }
   if (B == 1) res_.learning_rates[0] = 0.5 * (o.lr_low + o.lr_high);
-
   // Several initial poses (e.g. a new detection and the previous frame's result): run i starts from
   // initials[i % starts], so every start gets a spread of learning rates and the loss picks the winner.
-  poses_.assign(B, initial);
-  for (int i = 0; i < B; ++i) poses_[i] = initials[i % starts];
+  poses_.resize(B);
+  for (int i = 0; i < B; ++i) poses_[i] = initials_[i % starts];
   best_pose_ = poses_;
   best_.assign(B, LossValue());
   for (auto& b : best_) b.total = std::numeric_limits<double>::infinity();
   res_.run_histories.assign(B, {});
-  diameter_ = 1e-6;
-  for (const Mesh* m : meshes_) diameter_ = std::max(diameter_, m->diameter());
   active_.resize(B);
   for (int i = 0; i < B; ++i) active_[i] = i;
   source_.assign(B, -1);
@@ -219,6 +240,7 @@ void RefineRun::use_pixels(const cv::Mat& pixels) {
     cv::resize(pixels, coarse.obs.mask, cv::Size(coarse.cam.width, coarse.cam.height), 0, 0, cv::INTER_AREA);
   }
   pixels_changed_ = true;
+  ++pixels_version_;
 }
 
 void RefineRun::update_object_pixels(Renderer& renderer) {

@@ -15,12 +15,6 @@ namespace diffdope {
 struct JumpEvidence {
   double loss = 0, print = 0;
 };
-/// A print registration this many standard deviations of its chance level below another's contradicts a move
-/// from that pose to this one, whatever the loss says (a flipped label that the flat colour term barely sees).
-constexpr double kPrintContradiction = 1.0;
-/// The relative loss gain a shape-scan candidate needs without clear print evidence, for a small turn; it grows
-/// with the turn's angle (jump_margin): the detector's pose is a prior, not noise.
-constexpr double kJumpMargin = 0.01;
 /// kJumpMargin * (1 + 4 * angle / pi): 1.7 % for a 30-degree turn, 3 % for a quarter turn, 5 % for a half turn.
 double jump_margin(double angle);
 /// Whether the evidence supports a jump from the start's basin (`from`) to a shape-scan candidate (`to`),
@@ -41,22 +35,6 @@ bool turn_is_supported(double z_from, double z_to, double min_significance);
 
 class RefineRun {
  public:
-  /// Candidate runs the shape scan adds at most: of the turns some run prefers, those of lowest loss.
-  static constexpr int kScanCandidates = 1;
-  /// The polish stops once its best loss has not fallen by kPolishTolerance (relative) for kPolishPatience
-  /// iterations: a result that was already converged (an easy start) costs a few evaluations, not all.
-  static constexpr int kPolishPatience = 5;
-  static constexpr double kPolishTolerance = 1e-4;
-  /// A Newton step (RefinerOptions::newton_rounds) is taken when it raises the log-likelihood of the loss's noise
-  /// model (pose_covariance(): N = rendered pixels / kCorrelatedPixels Laplace residuals, N·ΔL / L) by more than
-  /// this many nats: half the pose's six degrees of freedom, what fitting them to noise alone gains on average.
-  /// A move within the loss's noise keeps the pose the descent left, the one nearer the start.
-  static constexpr double kNewtonEvidence = 3.0;
-  /// A given mask is taken as given when its outline lies on average within half a pixel, at the refining scale,
-  /// of the edge depth shows (outline_offset()): what rounding an outline to that grid leaves. Beyond it the
-  /// derived pixels replace the mask (derive_mask). How exact and segmenter-like masks score: docs/benchmarks.md.
-  static constexpr double kTrustedOutlineOffset = 0.5;
-
   /// Validates the input and prepares the scaled images, the loss and the learning rates. Throws
   /// std::invalid_argument on unusable input (as Refiner::refine()). `views`: one for an object; several share
   /// the pose (Refiner::refine_views()). `scaled_frame` (refine_all, one view): the frame's rgb / depth / edges
@@ -134,6 +112,13 @@ class RefineRun {
     Observation obs;
   };
   std::vector<Level> fine_, coarse_;  // per view
+  // The constructor's steps (after the input's checks): the images at each scale, the loss the input allows, the
+  // runs with their learning rates.
+  Level make_level(const RefineView& view, double scale, const Observation* shared, bool fine) const;
+  void set_up_levels(const std::vector<RefineView>& views, const Observation* scaled_frame,
+                     const Observation* coarse_frame);
+  void set_up_loss(const std::vector<RefineView>& views);
+  void start_runs();
   std::vector<std::vector<LossValue>> view_values_;  // evaluate()'s scratch
   int switch_at_ = 0;  // first iteration at the fine scale (0: no coarse phase)
   LossOptions loss_, scan_loss_;
@@ -145,6 +130,7 @@ class RefineRun {
   int derivations_ = 0;
   int rederive_at_ = 0;
   bool pixels_changed_ = false;
+  int pixels_version_ = 0;  // counts use_pixels(): what a measurement at a pose was made under
   /// derive_object_pixels() about `poses` within `margin` metres, at the fine scale and area-resized to the
   /// coarse one; false (the masks unchanged) when no pixel was found.
   bool derive_pixels(Renderer& renderer, const std::vector<Pose>& poses, double margin);
@@ -162,9 +148,7 @@ class RefineRun {
   int k_ = 0, stale_ = 0;
   int steps_ = 0;  // iterations stepped (k_ jumps when the coarse phase stalls)
   int halvings_ = 0;  // successive halvings done (of three)
-  // The shape scan (RefinerOptions::explore_tolerance): once, when the fine phase begins. A turned pose is a
-  // candidate only when its loss is lower than its run's own by more than kScanMargin (relative).
-  static constexpr double kScanMargin = 0.01;
+  // The shape scan (RefinerOptions::explore_tolerance): once, when the fine phase begins (kScanMargin).
   std::vector<Pose> turns_;  // model-frame turns tried on every run
   std::vector<ShapeRotation> print_axes_;
   double print_range_ = 0;
@@ -175,25 +159,37 @@ class RefineRun {
   void polish(Renderer& renderer, RefineResult& res);
   /// The Newton steps (RefinerOptions::newton_rounds) from res.pose, each taken on kNewtonEvidence.
   void newton(Renderer& renderer, RefineResult& res);
+  /// The noise model's count of independent residuals at `pose` (kCorrelatedPixels; one render per view).
+  double residual_count(Renderer& renderer, const Pose& pose);
   // finish()'s steps.
   /// The run of lowest loss among runs [first, last) (-1: none).
   int lowest(const RefineResult& res, int first, int last) const;
   /// Makes run `i`'s best the result.
   void take(RefineResult& res, int i) const;
-  /// The result's print significance, measured once when needed (the candidate's check, the print turn's).
-  struct ResultPrint {
+  /// The print significance of the last pose it was measured at, under the object pixels of then: measured once
+  /// per pose and pixels when needed (the candidate's check, the print turn's), never invalidated by hand.
+  struct PrintAtPose {
+    explicit PrintAtPose(RefineRun& of) : run(of) {}
     RefineRun& run;
+    Pose measured;
+    int pixels = -1;  // pixels_version_ when measured (-1: never)
     double z = 0;
-    bool known = false;
-    double at(Renderer& renderer, const RefineResult& res);
+    double at(Renderer& renderer, const Pose& pose);
+    void set(const Pose& pose, double significance);
   };
+  /// The runs' bests as the result's, and the start's own basin (the runs from the starts) chosen.
+  RefineResult start_result();
   /// After a coarse phase, and under newly derived pixels: the initial loss at the fine scale, and a start no run
   /// beat as the result.
   void weigh_starts(Renderer& renderer, RefineResult& res);
   /// The shape scan's best candidate replaces the start's basin when the evidence supports the jump.
-  void weigh_candidate(Renderer& renderer, RefineResult& res, ResultPrint& print);
+  void weigh_candidate(Renderer& renderer, RefineResult& res, PrintAtPose& print);
+  /// Without a mask: the object's pixels derived once more, about the chosen result.
+  void derive_pixels_at_result(Renderer& renderer, RefineResult& res);
   /// The print alignment's turn about print_axes_, kept when the loss and the print's registration allow it.
-  void align_result_print(Renderer& renderer, RefineResult& res, ResultPrint& print);
+  void align_result_print(Renderer& renderer, RefineResult& res, PrintAtPose& print);
+  /// The print alignment then the Newton steps, again (kAlignmentPasses) when the steps went on far.
+  void align_print_and_step(Renderer& renderer, RefineResult& res, PrintAtPose& print);
   /// Mask IoU, depth inliers and print registration at the result, per view; returns the rendered pixels.
   int score_views(Renderer& renderer, RefineResult& res);
   /// Curvature, covariance, convergence, verdict and time of the result.

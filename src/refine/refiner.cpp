@@ -171,7 +171,7 @@ std::vector<Pose> Refiner::retry_starts(const RefinerOptions& o, const Mesh& mes
   std::vector<ShapeRotation> axes;
   for (const ShapeRotation& c : shape_rotations(mesh)) {
     bool seen = false;
-    for (const ShapeRotation& a : axes) seen = seen || std::abs(a.axis.dot(c.axis)) > 0.999;
+    for (const ShapeRotation& a : axes) seen = seen || std::abs(a.axis.dot(c.axis)) > std::cos(kSameAxisAngle);
     if (!seen) axes.push_back(ShapeRotation{c.axis, c.pivot, 0.0, 0.0});
   }
   std::vector<Pose> turns;
@@ -324,8 +324,8 @@ const std::vector<ShapeRotation>& Refiner::shape_rotations(const Mesh& mesh) {
 }
 
 bool Refiner::is_declared_turn(const RefinerOptions& o, const Mesh& mesh, const Pose& turn) const {
-  const double radius = 0.5 * mesh.diameter(), angle_tol = 0.1;  // (30-degree steps: 0.1 rad tells them apart)
-  return mesh.symmetry.contains(turn, angle_tol, o.explore_tolerance * mesh.diameter(), radius);
+  const double radius = 0.5 * mesh.diameter();
+  return mesh.symmetry.contains(turn, kDeclaredTurnAngle, o.explore_tolerance * mesh.diameter(), radius);
 }
 
 std::vector<Pose> Refiner::shape_turns(const RefinerOptions& o, const Mesh& mesh, StartKind kind) {
@@ -351,13 +351,13 @@ std::vector<ShapeRotation> Refiner::print_axes(const RefinerOptions& o, const Me
   // Several principal axes of revolution (a ball): every direction is one; the fit adds nothing.
   if (fitted->second && candidates.size() < 2) {
     const ShapeRotation& f = *fitted->second;
-    const double kSameDirection = std::cos(3.0 * M_PI / 180.0), kSameLine = 0.005 * mesh.diameter();
+    const double same_direction = std::cos(kSameAxisAngle), same_line = kSameAxisOffset * mesh.diameter();
     bool added = false;
     for (ShapeRotation& c : candidates)
-      if (std::abs(c.axis.dot(f.axis)) > kSameDirection) {
+      if (std::abs(c.axis.dot(f.axis)) > same_direction) {
         // The same axis, unless the principal one runs beside it (its centroid pulled off by an appendage):
         // then the fitted one, about which most of the surface turns into itself.
-        if ((f.pivot - c.pivot).cross(c.axis).norm() > kSameLine) c = f;
+        if ((f.pivot - c.pivot).cross(c.axis).norm() > same_line) c = f;
         added = true;
       }
     if (!added) candidates.push_back(f);
@@ -366,7 +366,7 @@ std::vector<ShapeRotation> Refiner::print_axes(const RefinerOptions& o, const Me
   std::vector<ShapeRotation> axes;
   for (const ShapeRotation& c : candidates) {
     ShapeRotation turn = c;
-    turn.angle = M_PI / 6;
+    turn.angle = 2 * M_PI / kShapeAngleSteps;  // (the analysis' step)
     if (!is_declared_turn(o, mesh, turn.as_pose())) axes.push_back(c);
   }
   return axes;
@@ -453,7 +453,7 @@ long planned_evaluations(const RefinerOptions& o) {
       active = (active + 1) / 2, candidates = (candidates + 1) / 2;
     if (k == scan_at && k < o.iterations) {
       total += long(active) * (1 + kMaxShapeTurns);
-      candidates = std::min({active, kMaxShapeTurns, RefineRun::kScanCandidates});  // runs from preferred turns
+      candidates = std::min({active, kMaxShapeTurns, kScanCandidates});  // runs from preferred turns
     }
     total += active + candidates;
   }

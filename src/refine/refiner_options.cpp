@@ -120,8 +120,44 @@ RefinerOptions RefinerOptions::from_yaml_string(const std::string& yaml, const s
   return from_yaml_string(yaml, RefinerOptions(), origin);
 }
 
+namespace {
 
+/// refiner_option_table()'s rows after the accuracy stages': the schedule's seed and stops, the object's pixels,
+/// the verdict, the device.
+void append_rows(std::vector<OptionSpec<RefinerOptions>>& r) {
+  using O = RefinerOptions;
+  const std::vector<OptionSpec<O>> rows = {
+    option_row("seed", &O::seed, 0, 0, "", "learning-rate draws: same seed, same inputs, same result"),
+    option_row("successive_halving", &O::successive_halving, 0, 0, "",
+               "keep the better half of the runs at 25, 50 and 75 % of the iterations (false: the paper's algorithm)"),
+    option_row("early_stop_patience", &O::early_stop_patience, 0, O::kMaxIterations, " iterations (0: off)",
+               "stop when no run improved by early_stop_tolerance for this many iterations"),
+    option_row("early_stop_tolerance", &O::early_stop_tolerance, 0, 1, "", "relative loss improvement that counts"),
+    option_row("no_mask_window", &O::no_mask_window, 0, 10, "",
+               "without a mask: how far the object may be from its start, as a fraction of its size"),
+    option_row("derive_mask", &O::derive_mask, 0, 0, "",
+               "with depth: derive the object's pixels near its render, without a mask, or to check a given one "
+               "(false: a window; a mask as given)"),
+    option_row("inlier_threshold", &O::inlier_threshold, 0, 10, " metres",
+               "a depth reading this near the render is an inlier, at least (verdict, scores)", true),
+    option_row("max_depth_noise", &O::max_depth_noise, 0, 1, " metres at 1 m (0: a fixed band)",
+               "verdict: the noisiest depth excused; the inlier band is 3x the noise measured, up to this"),
+    option_row("min_mask_iou", &O::min_mask_iou, 0, 1, "", "verdict: plausible needs at least this mask IoU"),
+    option_row("min_depth_inliers", &O::min_depth_inliers, 0, 1, "",
+               "verdict: plausible needs at least this fraction of depth inliers"),
+    option_row("min_print_significance", &O::min_print_significance, 0, 100, " (0: not weighed)",
+               "verdict: the print lines up at least this many standard deviations above chance"),
+    option_row("probe_distance", &O::probe_distance, 0, 1, " metres (0: off)",
+               "the loss is probed around the result at this surface displacement (curvature, covariance)"),
+    option_row("device", &O::device, 0, 0, "", "cpu, cuda (an error without a GPU) or auto (CUDA when present)"),
+    option_row("plain_model_rgb", &O::plain_model_rgb, 0, 0, "",
+               "true: a model without print (one colour) still gets the colour term"),
+  };
+  r.insert(r.end(), rows.begin(), rows.end());
+  r[r.size() - 2].choices = {"cpu", "cuda", "auto"};
+}
 
+}  // namespace
 
 const std::vector<OptionSpec<RefinerOptions>>& refiner_option_table() {
   using O = RefinerOptions;
@@ -152,39 +188,15 @@ const std::vector<OptionSpec<RefinerOptions>>& refiner_option_table() {
         option_row("newton_rounds", &O::newton_rounds, 0, 32, " (0: off)",
                    "then Newton steps on the loss's probed curvature, taken on clear evidence; the reach doubles "
                    "while the valley goes on, else halves"),
-        option_row("seed", &O::seed, 0, 0, "", "learning-rate draws: same seed, same inputs, same result"),
-        option_row("successive_halving", &O::successive_halving, 0, 0, "",
-                   "keep the better half of the runs at 25, 50 and 75 % of the iterations (false: the paper's algorithm)"),
-        option_row("early_stop_patience", &O::early_stop_patience, 0, O::kMaxIterations, " iterations (0: off)",
-                   "stop when no run improved by early_stop_tolerance for this many iterations"),
-        option_row("early_stop_tolerance", &O::early_stop_tolerance, 0, 1, "", "relative loss improvement that counts"),
-        option_row("no_mask_window", &O::no_mask_window, 0, 10, "",
-                   "without a mask: how far the object may be from its start, as a fraction of its size"),
-        option_row("derive_mask", &O::derive_mask, 0, 0, "",
-                   "with depth: derive the object's pixels near its render, without a mask, or to check a given one "
-                   "(false: a window; a mask as given)"),
-        option_row("inlier_threshold", &O::inlier_threshold, 0, 10, " metres",
-                   "a depth reading this near the render is an inlier, at least (verdict, scores)", true),
-        option_row("max_depth_noise", &O::max_depth_noise, 0, 1, " metres at 1 m (0: a fixed band)",
-                   "verdict: the noisiest depth excused; the inlier band is 3x the noise measured, up to this"),
-        option_row("min_mask_iou", &O::min_mask_iou, 0, 1, "", "verdict: plausible needs at least this mask IoU"),
-        option_row("min_depth_inliers", &O::min_depth_inliers, 0, 1, "",
-                   "verdict: plausible needs at least this fraction of depth inliers"),
-        option_row("min_print_significance", &O::min_print_significance, 0, 100, " (0: not weighed)",
-                   "verdict: the print lines up at least this many standard deviations above chance"),
-        option_row("probe_distance", &O::probe_distance, 0, 1, " metres (0: off)",
-                   "the loss is probed around the result at this surface displacement (curvature, covariance)"),
-        option_row("device", &O::device, 0, 0, "", "cpu, cuda (an error without a GPU) or auto (CUDA when present)"),
-        option_row("plain_model_rgb", &O::plain_model_rgb, 0, 0, "",
-                   "true: a model without print (one colour) still gets the colour term"),
     };
-    r[r.size() - 2].choices = {"cpu", "cuda", "auto"};
+    append_rows(r);
     append_section(r, loss_option_table(), "loss", &O::loss);
     append_section(r, render_option_table(), "render", &O::render);
     return r;
   }();
   return rows;
 }
+
 
 std::string RefinerOptions::to_yaml() const {
   std::ostringstream out;

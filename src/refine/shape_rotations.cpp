@@ -87,9 +87,8 @@ double mean_nearest(const std::vector<Eigen::Vector3f>& moved, const std::vector
 }  // namespace
 
 std::vector<ShapeRotation> analyse_shape_rotations(const Mesh& mesh) {
-  constexpr int kSamples = 1024;
   // Two independent samples: the distance between them at no rotation is the sampling's own floor.
-  const std::vector<Eigen::Vector3f> a = sample_surface(mesh, kSamples, 1), b = sample_surface(mesh, kSamples, 2);
+  const std::vector<Eigen::Vector3f> a = sample_surface(mesh, kShapeSamples, 1), b = sample_surface(mesh, kShapeSamples, 2);
   if (a.empty() || !(mesh.diameter() > 0)) return {};
   // The surface's exact first and second moments (a sample's would tilt the axes of a short cylinder by degrees).
   double area = 0;
@@ -158,9 +157,8 @@ std::vector<ShapeRotation> revolution_axes(const std::vector<ShapeRotation>& can
 
 std::optional<ShapeRotation> fit_revolution_axis(const Mesh& mesh, double tolerance) {
   if (!(tolerance > 0) || !(mesh.diameter() > 0)) return std::nullopt;
-  constexpr int kSamples = 1024, kRounds = 12;
   std::vector<Eigen::Vector3f> normals;
-  const std::vector<Eigen::Vector3f> a = sample_surface(mesh, kSamples, 3, &normals);
+  const std::vector<Eigen::Vector3f> a = sample_surface(mesh, kShapeSamples, 3, &normals);
   if (a.size() < 16) return std::nullopt;
   // The normal line of sample i, in Pluecker coordinates (n, m = p x n), meets the axis (direction d, moment
   // dbar = c x d) when n . dbar + m . d = 0: linear in (dbar, d). Least squares with |d| = 1, dbar eliminated
@@ -174,7 +172,7 @@ std::optional<ShapeRotation> fit_revolution_axis(const Mesh& mesh, double tolera
   }
   std::vector<double> w(a.size(), 1.0);
   Eigen::Vector3d d = Eigen::Vector3d::UnitZ(), dbar = Eigen::Vector3d::Zero();
-  for (int round = 0; round < kRounds; ++round) {
+  for (int round = 0; round < kRevolutionFitRounds; ++round) {
     Eigen::Matrix3d Nnn = Eigen::Matrix3d::Zero(), Nnm = Eigen::Matrix3d::Zero(), Nmm = Eigen::Matrix3d::Zero();
     for (size_t i = 0; i < a.size(); ++i) {
       Nnn += w[i] * n[i] * n[i].transpose();
@@ -194,7 +192,7 @@ std::optional<ShapeRotation> fit_revolution_axis(const Mesh& mesh, double tolera
     for (size_t i = 0; i < a.size(); ++i) r[i] = std::abs(n[i].dot(dbar) + m[i].dot(d));
     std::vector<double> sorted = r;
     std::nth_element(sorted.begin(), sorted.begin() + long(sorted.size() / 2), sorted.end());
-    const double cut = 3.0 * std::max(sorted[sorted.size() / 2], 1e-6 * mesh.diameter());
+    const double cut = kRevolutionInlierCut * std::max(sorted[sorted.size() / 2], 1e-6 * mesh.diameter());
     for (size_t i = 0; i < a.size(); ++i) w[i] = r[i] <= cut ? 1.0 : 0.0;
   }
   ShapeRotation axis;
@@ -202,12 +200,11 @@ std::optional<ShapeRotation> fit_revolution_axis(const Mesh& mesh, double tolera
   axis.pivot = centre + d.cross(dbar);  // the axis point nearest the centre (dbar = c x d)
   // Kept when most of the surface (kRevolutionShare) maps onto itself after turns over the print search's
   // range: the turned sample's distances to a second sample, against the samples' own distances.
-  const std::vector<Eigen::Vector3f> b = sample_surface(mesh, kSamples, 4);
+  const std::vector<Eigen::Vector3f> b = sample_surface(mesh, kShapeSamples, 4);
   std::vector<float> bx, by, bz;
   for (const auto& p : b) bx.push_back(p.x()), by.push_back(p.y()), bz.push_back(p.z());
-  constexpr double kRevolutionShare = 0.75;
   const double floor = quantile(nearest_distances(a, bx, by, bz), kRevolutionShare);
-  for (const double degrees : {10.0, 20.0, 40.0}) {
+  for (const double degrees : kRevolutionCheckDegrees) {
     axis.angle = degrees * M_PI / 180.0;
     const Pose T = axis.as_pose();
     std::vector<Eigen::Vector3f> moved;
