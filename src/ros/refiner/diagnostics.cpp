@@ -6,13 +6,13 @@
 namespace diffdope_ros {
 
 void RefinerNodelet::onDiagnostics(diagnostic_updater::DiagnosticStatusWrapper& stat) {
-  Stats s;
+  Handover::Stats s;
   {
-    std::lock_guard<std::mutex> lock(work_mutex_);
-    s = stats_;
+    std::lock_guard<std::mutex> lock(handover_.mutex);
+    s = handover_.stats;
   }
   const ErrorReporter::Summary e = errors_.summary();
-  const std::string& input_error = input_sync_.error();
+  const std::string& input_error = inputs_.sync.error();
   int enabled = 0;
   for (const auto& slot : slots_) enabled += slot->mesh != nullptr;
   const double span = (s.last_refined - s.first_refined).toSec();
@@ -33,7 +33,7 @@ void RefinerNodelet::onDiagnostics(diagnostic_updater::DiagnosticStatusWrapper& 
   stat.add("streaming", streaming);
   stat.add("inputs", input_error.empty() ? "subscribed" : "none: " + input_error);
   stat.add("objects enabled", std::to_string(enabled) + " of " + std::to_string(slots_.size()));
-  stat.add("backend", refiner_ ? refiner_->backend() : std::string("none (configuration error)"));
+  stat.add("backend", s.backend);
   for (const auto& slot : slots_) {
     const int tracked = slot->tracking, n = slot->config.max_instances;
     std::string state = "disabled: " + slot->disabled_reason;
@@ -41,8 +41,8 @@ void RefinerNodelet::onDiagnostics(diagnostic_updater::DiagnosticStatusWrapper& 
     else if (slot->mesh) state = "tracking " + std::to_string(tracked) + " of up to " + std::to_string(n) + " instances";
     stat.add("object " + slot->config.name, state);
   }
-  input_sync_.addDiagnostics(stat);
-  if (inbox_) inbox_->addDiagnostics(stat);
+  inputs_.sync.addDiagnostics(stat);
+  if (inputs_.inbox) inputs_.inbox->addDiagnostics(stat);
   stat.add("frames synchronized", s.frames_synced);
   stat.add("frames refined", s.frames_refined);
   stat.add("frames skipped (worker busy)", s.frames_skipped);
@@ -58,7 +58,7 @@ void RefinerNodelet::onDiagnostics(diagnostic_updater::DiagnosticStatusWrapper& 
   stat.add("~refine calls failed or refused", s.requests_failed);
   stat.add("estimated cost (ms per object and evaluation)",
            s.cost_measured ? format_fixed(s.ms_per_evaluation, 3) + " (measured)"
-                           : format_fixed(1e3 * refine_time_.kPriorSecondsPerEvaluation, 3) + " (prior, nothing timed yet)");
+                           : format_fixed(1e3 * work_.refine_time.kPriorSecondsPerEvaluation, 3) + " (prior, nothing timed yet)");
   stat.add("last error", e.last_error);
   for (const auto& kv : e.error_counts) stat.add("errors: " + kv.first, kv.second);
   for (const auto& kv : e.warn_counts) stat.add("warnings: " + kv.first, kv.second);

@@ -78,7 +78,7 @@ std::vector<diffdope_ros::RefinedPose> RefinerNodelet::publishResults(
     implausible += diffdope::verdict_state(r) == diffdope::VerdictState::kImplausible;
     diffdope_ros::RefinedPose p = message(seed, refined);
     out.push_back(p);
-    if (!r.plausible && !publish_implausible_) continue;  // scores still go out in ~refined_poses
+    if (!r.plausible && !work_.publish_implausible) continue;  // scores still go out in ~refined_poses
     in.pose_pub.publish(p.pose);
     if (r.curvature.valid) {  // the pose with the covariance the loss's curvature gives (pose_curvature.hpp)
       geometry_msgs::PoseWithCovarianceStamped c;
@@ -97,32 +97,32 @@ std::vector<diffdope_ros::RefinedPose> RefinerNodelet::publishResults(
     t.transform = transform_to_msg(refined * inv_model);
     transforms.push_back(t);
   }
-  if (settings_.publish_tf && !transforms.empty()) tf_broadcaster_->sendTransform(transforms);
+  if (settings_.publish_tf && !transforms.empty()) outputs_.tf_broadcaster->sendTransform(transforms);
   const double latency = (ros::Time::now() - frame.header.stamp).toSec();
   diffdope_ros::RefinedPoseArray array;
   array.header = frame.header;
   array.poses = out;
   array.latency = latency;
   array.processing_time = (ros::WallTime::now() - frame.received).toSec();
-  refined_pub_.publish(array);
+  outputs_.refined.publish(array);
   {
-    std::lock_guard<std::mutex> lock(work_mutex_);
+    std::lock_guard<std::mutex> lock(handover_.mutex);
     const ros::WallTime now = ros::WallTime::now();
-    if (stats_.frames_refined == 0) stats_.first_refined = now;
-    stats_.last_refined = now;
-    ++stats_.frames_refined;
-    stats_.objects_refined += long(out.size()) - not_refined;
-    stats_.implausible += implausible;
-    stats_.undetermined += undetermined;
-    stats_.last_latency = latency;
-    stats_.latency_sum += latency;
-    stats_.last_refine_ms = (now - start).toSec() * 1e3;
-    stats_.ms_per_evaluation = 1e3 * refine_time_.seconds_per_evaluation();
-    stats_.cost_measured = refine_time_.observations() > 0;
+    if (handover_.stats.frames_refined == 0) handover_.stats.first_refined = now;
+    handover_.stats.last_refined = now;
+    ++handover_.stats.frames_refined;
+    handover_.stats.objects_refined += long(out.size()) - not_refined;
+    handover_.stats.implausible += implausible;
+    handover_.stats.undetermined += undetermined;
+    handover_.stats.last_latency = latency;
+    handover_.stats.latency_sum += latency;
+    handover_.stats.last_refine_ms = (now - start).toSec() * 1e3;
+    handover_.stats.ms_per_evaluation = 1e3 * work_.refine_time.seconds_per_evaluation();
+    handover_.stats.cost_measured = work_.refine_time.observations() > 0;
   }
   try {  // visualisation must never cost the refinement its result
-    if (overlay_pub_.getNumSubscribers() > 0) publishOverlay(frame, target_of, results);
-    if (markers_pub_.getNumSubscribers() > 0) publishMarkers(frame, target_of, results);
+    if (outputs_.overlay.getNumSubscribers() > 0) publishOverlay(frame, target_of, results);
+    if (outputs_.markers.getNumSubscribers() > 0) publishMarkers(frame, target_of, results);
   } catch (const std::exception& e) {
     errors_.error("visualisation", std::string("overlay/markers not published: ") + e.what());
   }
@@ -131,7 +131,7 @@ std::vector<diffdope_ros::RefinedPose> RefinerNodelet::publishResults(
 
 void RefinerNodelet::reportLostTrack(const Slot& s, int instance) {
   const std::string& name = s.instances[size_t(instance)].name;
-  errors_.warn("lost_" + name, "lost track of '" + name + "' (" + std::to_string(track_options_.max_failures) +
+  errors_.warn("lost_" + name, "lost track of '" + name + "' (" + std::to_string(work_.track_options.max_failures) +
                                    " implausible refinements in a row); waiting for a detection");
 }
 

@@ -10,15 +10,15 @@ bool RefinerNodelet::onRefineService(diffdope_ros::Refine::Request& req, diffdop
   job->request = req;
   std::future<diffdope_ros::Refine::Response> done = job->response.get_future();
   {
-    std::lock_guard<std::mutex> lock(work_mutex_);
-    if (stop_) {
+    std::lock_guard<std::mutex> lock(handover_.mutex);
+    if (handover_.stop) {
       res.success = false;
       res.message = "the refiner is shutting down";
       return true;
     }
-    requests_.push_back(job);
+    handover_.requests.push_back(job);
   }
-  work_cv_.notify_one();
+  handover_.cv.notify_one();
   res = done.get();
   return true;  // failures are reported in res.success / res.message, not as a failed call
 }
@@ -38,7 +38,7 @@ diffdope_ros::Refine::Response RefinerNodelet::processRequest(const diffdope_ros
   for (const auto& p : req.initial_poses) names.pose_names.push_back(p.name);
   names.iterations = req.iterations;
   names.batch_size = req.batch_size;
-  const CheckedRequest checked = check_refine_request(objects, names, refiner_options_);
+  const CheckedRequest checked = check_refine_request(objects, names, work_.refiner_options);
   if (!checked.error.empty()) return fail(checked.error);
   if (!frame) return fail("no synchronized frame received yet (check the input topics)");
 
@@ -59,7 +59,7 @@ diffdope_ros::Refine::Response RefinerNodelet::processRequest(const diffdope_ros
   // The time budget, before any detection is used up.
   const int count = int(targets.seeds.size() + targets.known.size());
   if (const std::string why =
-          diffdope::check_request_time(checked.options, count, refine_time_, settings_.max_request_time);
+          diffdope::check_request_time(checked.options, count, work_.refine_time, settings_.max_request_time);
       !why.empty())
     return fail(why);
   take_known_starts(objects, targets.known, stamp, targets.seeds);

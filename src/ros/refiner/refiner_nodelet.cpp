@@ -18,55 +18,55 @@ void RefinerNodelet::onInit() {
   settings_ = load_refiner_settings(pnh, getName(), errors_);
   if (settings_.error.empty()) errors_.set_throttle_period(settings_.error_throttle);
   mode_ = settings_.mode;
-  track_options_ = settings_.track;
-  publish_implausible_ = settings_.publish_implausible;
+  work_.track_options = settings_.track;
+  work_.publish_implausible = settings_.publish_implausible;
 
-  tf_buffer_ = std::make_unique<tf2_ros::Buffer>(ros::Duration(30.0));
-  tf_listener_ = std::make_unique<tf2_ros::TransformListener>(*tf_buffer_, nh);
-  tf_broadcaster_ = std::make_unique<tf2_ros::TransformBroadcaster>();
-  refined_pub_ = pnh.advertise<diffdope_ros::RefinedPoseArray>("refined_poses", 10);
-  markers_pub_ = pnh.advertise<visualization_msgs::MarkerArray>("markers", 1);
-  it_ = std::make_unique<image_transport::ImageTransport>(nh);
+  outputs_.tf_buffer = std::make_unique<tf2_ros::Buffer>(ros::Duration(30.0));
+  outputs_.tf_listener = std::make_unique<tf2_ros::TransformListener>(*outputs_.tf_buffer, nh);
+  outputs_.tf_broadcaster = std::make_unique<tf2_ros::TransformBroadcaster>();
+  outputs_.refined = pnh.advertise<diffdope_ros::RefinedPoseArray>("refined_poses", 10);
+  outputs_.markers = pnh.advertise<visualization_msgs::MarkerArray>("markers", 1);
+  inputs_.it = std::make_unique<image_transport::ImageTransport>(nh);
   image_transport::ImageTransport pit(pnh);
-  overlay_pub_ = pit.advertise("overlay", 1);
+  outputs_.overlay = pit.advertise("overlay", 1);
 
   loadObjects();
   std::vector<DetectionInbox::Object> inbox_objects;
   for (const auto& slot : slots_)
     inbox_objects.push_back({slot->config.name, slot->config.max_instances, slot->config.pose_topic});
-  inbox_ = std::make_unique<DetectionInbox>(std::move(inbox_objects), settings_, errors_);
+  inputs_.inbox = std::make_unique<DetectionInbox>(std::move(inbox_objects), settings_, errors_);
 
-  diagnostics_ = std::make_unique<diagnostic_updater::Updater>(nh, pnh, getName());
-  diagnostics_->setHardwareID("diffdope_refiner");
-  diagnostics_->add("refiner", this, &RefinerNodelet::onDiagnostics);
+  outputs_.diagnostics = std::make_unique<diagnostic_updater::Updater>(nh, pnh, getName());
+  outputs_.diagnostics->setHardwareID("diffdope_refiner");
+  outputs_.diagnostics->add("refiner", this, &RefinerNodelet::onDiagnostics);
 
   setupReconfigure();
   worker_ = std::thread([this] { workerLoop(); });
-  inbox_->subscribe(nh, pnh);
-  input_sync_.start(nh, pnh, *it_, [this](std::shared_ptr<Frame> frame) { onFrame(std::move(frame)); });
+  inputs_.inbox->subscribe(nh, pnh);
+  inputs_.sync.start(nh, pnh, *inputs_.it, [this](std::shared_ptr<Frame> frame) { onFrame(std::move(frame)); });
   // The service runs on its own queue and thread: a call waits for the worker without holding up the inputs or
   // the other nodelets of the manager. Calls are served one after the other (the worker refines one at a time).
   ros::NodeHandle service_nh(pnh);
-  service_nh.setCallbackQueue(&service_queue_);
-  refine_srv_ = service_nh.advertiseService("refine", &RefinerNodelet::onRefineService, this);
-  service_spinner_ = std::make_unique<ros::AsyncSpinner>(1, &service_queue_);
-  service_spinner_->start();
-  watchdog_timer_ = pnh.createWallTimer(ros::WallDuration(1.0), &RefinerNodelet::onWatchdog, this);
+  service_nh.setCallbackQueue(&inputs_.service_queue);
+  inputs_.refine_service = service_nh.advertiseService("refine", &RefinerNodelet::onRefineService, this);
+  inputs_.service_spinner = std::make_unique<ros::AsyncSpinner>(1, &inputs_.service_queue);
+  inputs_.service_spinner->start();
+  inputs_.watchdog = pnh.createWallTimer(ros::WallDuration(1.0), &RefinerNodelet::onWatchdog, this);
   // Latched: a launch or a bag player can wait for the meshes to be loaded and the inputs subscribed; false when
   // the configuration leaves nothing to refine (the error is logged and in diagnostics).
-  ready_pub_ = pnh.advertise<std_msgs::Bool>("ready", 1, true);
+  outputs_.ready = pnh.advertise<std_msgs::Bool>("ready", 1, true);
   std_msgs::Bool ready;
-  ready.data = refiner_ != nullptr;
-  ready_pub_.publish(ready);
-  const diffdope::RefinerOptions& o = refiner_options_;
-  const diffdope::TrackOptions& t = track_options_;
+  ready.data = work_.refiner != nullptr;
+  outputs_.ready.publish(ready);
+  const diffdope::RefinerOptions& o = work_.refiner_options;
+  const diffdope::TrackOptions& t = work_.track_options;
   NODELET_INFO_STREAM("diffdope refiner ready: mode "
                       << to_string(mode_) << ", inputs rgb" << (settings_.use_depth ? "+depth" : "")
                       << (settings_.use_mask ? "+mask" : "") << ", " << slots_.size() << " object(s), "
                       << o.batch_size << " runs x " << o.iterations << " iterations (steady tracks: "
                       << (t.batch_size > 0 ? t.batch_size : o.batch_size) << " x "
                       << (t.iterations > 0 ? t.iterations : o.iterations) << "), backend "
-                      << (refiner_ ? refiner_->backend() : std::string("none")));
+                      << (work_.refiner ? work_.refiner->backend() : std::string("none")));
 }
 
 void RefinerNodelet::loadObjects() {
@@ -81,13 +81,13 @@ void RefinerNodelet::loadObjects() {
     // Class ids the objects file gives (DOPE's config_pose.yaml has them); ~class_ids, when set, wins.
     for (const diffdope::ObjectConfig& o : cfg.objects)
       if (o.class_id >= 0) settings_.class_ids.emplace(o.name, o.class_id);
-    refiner_options_ = cfg.refiner;
+    work_.refiner_options = cfg.refiner;
     // The optional refiner file overrides the objects file's refiner section (launch-time tuning).
     if (!settings_.refiner_config.empty())
-      refiner_options_ = diffdope::RefinerOptions::from_yaml_file(settings_.refiner_config, cfg.refiner);
+      work_.refiner_options = diffdope::RefinerOptions::from_yaml_file(settings_.refiner_config, cfg.refiner);
     // Then the ~parameters of the runtime settings (cfg/Refiner.cfg: iterations, image_scale, loss weights...),
     // checked as the YAML's are.
-    const RuntimeSettings launch_values{mode_, refiner_options_, track_options_, publish_implausible_};
+    const RuntimeSettings launch_values{mode_, work_.refiner_options, work_.track_options, work_.publish_implausible};
     RefinerConfig launch = to_config(launch_values);
     launch.__fromMessage__(settings_.runtime_parameters);  // (read with the other settings)
     launch.mode = to_string(mode_);  // (read with the settings, with its own message)
@@ -101,13 +101,15 @@ void RefinerNodelet::loadObjects() {
                                                               "the parameter server until deleted)");
     const std::string bound = bound_warning(overrides);
     if (!bound.empty()) errors_.warn("parameters", "~parameter " + bound);
-    refiner_options_ = settings.refiner;
-    track_options_ = settings.track;
-    if (!settings_.device.empty()) refiner_options_.device = settings_.device;
-    refiner_options_.validate();
+    work_.refiner_options = settings.refiner;
+    work_.track_options = settings.track;
+    if (!settings_.device.empty()) work_.refiner_options.device = settings_.device;
+    work_.refiner_options.validate();
     // One refiner (and renderer: CUDA keeps the meshes on the device) for the node's life; "cuda" without a
     // device throws here, "auto" falls back to the CPU with one line.
-    refiner_ = std::make_unique<diffdope::Refiner>(refiner_options_);
+    work_.refiner = std::make_unique<diffdope::Refiner>(work_.refiner_options);
+    std::lock_guard<std::mutex> lock(handover_.mutex);
+    handover_.stats.backend = work_.refiner->backend();
   } catch (const std::exception& e) {
     errors_.error("config", std::string("configuration error, no object will be refined: ") + e.what());
     return;
@@ -125,10 +127,10 @@ void RefinerNodelet::loadObjects() {
     slot->config = config;
     try {
       slot->mesh = std::make_unique<diffdope::Mesh>(diffdope::load_object_mesh(slot->config));
-      refiner_->prepare(*slot->mesh);  // its first detection then pays no set-up
+      work_.refiner->prepare(*slot->mesh);  // its first detection then pays no set-up
       // Detections within one diameter of an instance's last known centre are that instance's.
       slot->tracks = std::make_unique<diffdope::InstanceTracks>(
-          slot->config.max_instances, track_options_, slot->mesh->center().cast<double>(), slot->mesh->diameter());
+          slot->config.max_instances, work_.track_options, slot->mesh->center().cast<double>(), slot->mesh->diameter());
       NODELET_INFO_STREAM("object '" << slot->config.name << "': " << slot->mesh->num_triangles() << " triangles, "
                                      << "diameter " << format_fixed(slot->mesh->diameter()) << " m, box centre ("
                                      << format_fixed(slot->mesh->center().x()) << ", "
@@ -156,44 +158,44 @@ void RefinerNodelet::loadObjects() {
 
 void RefinerNodelet::onFrame(std::shared_ptr<Frame> frame) {
   {
-    std::lock_guard<std::mutex> lock(work_mutex_);
-    ++stats_.frames_synced;
-    if (frame_pending_) ++stats_.frames_skipped;  // the worker was busy: streaming takes the newest frame
-    latest_frame_ = std::move(frame);
-    frame_pending_ = mode_ != StreamMode::kOnRequest;
+    std::lock_guard<std::mutex> lock(handover_.mutex);
+    ++handover_.stats.frames_synced;
+    if (handover_.frame_pending) ++handover_.stats.frames_skipped;  // the worker was busy: streaming takes the newest frame
+    handover_.latest_frame = std::move(frame);
+    handover_.frame_pending = mode_ != StreamMode::kOnRequest;
   }
-  work_cv_.notify_one();
+  handover_.cv.notify_one();
 }
 
 void RefinerNodelet::onWatchdog(const ros::WallTimerEvent&) {
-  if (inbox_) inbox_->resubscribeIfNeeded();
-  input_sync_.checkSynchronization();
+  if (inputs_.inbox) inputs_.inbox->resubscribeIfNeeded();
+  inputs_.sync.checkSynchronization();
   // force_update: this timer already paces it (1 s of wall time). update() gates on ros::Time, which under sim
   // time stops publishing after the clock jumps back (a looped bag) until it catches up again.
-  if (diagnostics_) diagnostics_->force_update();
+  if (outputs_.diagnostics) outputs_.diagnostics->force_update();
 }
 
 RefinerNodelet::~RefinerNodelet() {
-  reconfigure_server_.reset();  // (its callback uses the members below)
+  reconfigure_.server.reset();  // (its callback uses the members below)
   {
-    std::lock_guard<std::mutex> lock(work_mutex_);
-    stop_ = true;
-    for (auto& r : requests_) {
+    std::lock_guard<std::mutex> lock(handover_.mutex);
+    handover_.stop = true;
+    for (auto& r : handover_.requests) {
       diffdope_ros::Refine::Response res;
       res.success = false;
       res.message = "the refiner is shutting down";
       r->response.set_value(res);
     }
-    requests_.clear();
+    handover_.requests.clear();
   }
-  work_cv_.notify_all();
+  handover_.cv.notify_all();
   if (worker_.joinable()) worker_.join();
-  watchdog_timer_.stop();
-  if (service_spinner_) service_spinner_->stop();
-  refine_srv_.shutdown();
-  input_sync_.shutdown();
-  if (inbox_) inbox_->shutdown();
-  diagnostics_.reset();
+  inputs_.watchdog.stop();
+  if (inputs_.service_spinner) inputs_.service_spinner->stop();
+  inputs_.refine_service.shutdown();
+  inputs_.sync.shutdown();
+  if (inputs_.inbox) inputs_.inbox->shutdown();
+  outputs_.diagnostics.reset();
 }
 
 }  // namespace diffdope_ros

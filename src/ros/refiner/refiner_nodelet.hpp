@@ -118,69 +118,82 @@ class RefinerNodelet : public nodelet::Nodelet {
   void publishMarkers(const Frame& frame, const TargetList& targets, const std::vector<diffdope::RefineResult>& results);
   void onDiagnostics(diagnostic_updater::DiagnosticStatusWrapper& stat);  // diagnostics.cpp
 
-  // Launch-time ~parameters: read once in onInit, then only read.
+  // Read by every thread, written only in onInit: the launch-time ~parameters and the objects (whose tracks are
+  // the worker's; Slot::tracking is atomic). errors_ and mode_ are thread-safe.
   RefinerSettings settings_;
   ErrorReporter errors_;
-  // What reconfigure changes. mode_ is read by the callbacks too; the worker's copies (refiner_options_,
-  // track_options_, publish_implausible_) change only in applyPendingSettings().
   std::atomic<StreamMode> mode_{StreamMode::kTracking};
-  diffdope::RefinerOptions refiner_options_;
-  diffdope::TrackOptions track_options_;
-  bool publish_implausible_ = false;
-  // The callback thread owns runtime_settings_ / applied_config_ (the last accepted values); the worker takes
-  // pending_settings_ (work_mutex_) at its next job.
-  boost::recursive_mutex reconfigure_mutex_;
-  std::unique_ptr<dynamic_reconfigure::Server<RefinerConfig>> reconfigure_server_;
-  RuntimeSettings runtime_settings_;
-  RefinerConfig applied_config_;
-  std::optional<RuntimeSettings> pending_settings_;
-
-  std::unique_ptr<diffdope::Refiner> refiner_;            // the worker's (null after a configuration error)
-  std::unique_ptr<diffdope::Renderer> overlay_renderer_;  // the worker's, for ~overlay
-  diffdope::RefineTimeEstimator refine_time_;             // the worker's: learns from every refinement it times
   std::vector<std::unique_ptr<Slot>> slots_;
-  double last_frame_stamp_ = 0.0;  // worker thread only (resetOnTimeJump)
 
-  // Inputs.
-  std::unique_ptr<image_transport::ImageTransport> it_;
-  InputSync input_sync_{settings_, errors_};
-  std::unique_ptr<DetectionInbox> inbox_;
-  ros::ServiceServer refine_srv_;
-  // The service has its own queue and thread: a call waiting for the worker holds none of the manager's
-  // threads (which run this nodelet's inputs and every other nodelet in the manager).
-  ros::CallbackQueue service_queue_;
-  std::unique_ptr<ros::AsyncSpinner> service_spinner_;
-  ros::WallTimer watchdog_timer_;
+  /// The worker thread's alone (after onInit): what refines, and its copies of the tunable settings, changed only
+  /// in applyPendingSettings().
+  struct WorkerOwned {
+    diffdope::RefinerOptions refiner_options;
+    diffdope::TrackOptions track_options;
+    bool publish_implausible = false;
+    std::unique_ptr<diffdope::Refiner> refiner;            // null after a configuration error
+    std::unique_ptr<diffdope::Renderer> overlay_renderer;  // for ~overlay
+    diffdope::RefineTimeEstimator refine_time;             // learns from every refinement it times
+    double last_frame_stamp = 0.0;                         // resetOnTimeJump
+  } work_;
 
-  // Outputs.
-  std::unique_ptr<tf2_ros::Buffer> tf_buffer_;
-  std::unique_ptr<tf2_ros::TransformListener> tf_listener_;
-  std::unique_ptr<tf2_ros::TransformBroadcaster> tf_broadcaster_;
-  ros::Publisher refined_pub_, markers_pub_, ready_pub_;
-  image_transport::Publisher overlay_pub_;
-  std::unique_ptr<diagnostic_updater::Updater> diagnostics_;
+  /// The reconfigure callback's (under `mutex`, the server's): the last accepted values. The worker gets them
+  /// through Handover::pending_settings.
+  struct ReconfigureOwned {
+    boost::recursive_mutex mutex;
+    std::unique_ptr<dynamic_reconfigure::Server<RefinerConfig>> server;
+    RuntimeSettings settings;
+    RefinerConfig applied_config;
+  } reconfigure_;
 
-  // Hand-over between callbacks and the worker (work_mutex_).
-  std::mutex work_mutex_;
-  std::condition_variable work_cv_;
-  std::shared_ptr<Frame> latest_frame_;  // newest synchronized frame (kept for service calls)
-  bool frame_pending_ = false;           // latest_frame_ not yet processed by streaming
-  std::deque<std::shared_ptr<Request>> requests_;
-  bool stop_ = false;
+  /// The subscriptions, the service and the watchdog (set up in onInit, torn down first).
+  struct Inputs {
+    Inputs(const RefinerSettings& settings, ErrorReporter& errors) : sync(settings, errors) {}
+    std::unique_ptr<image_transport::ImageTransport> it;
+    InputSync sync;
+    std::unique_ptr<DetectionInbox> inbox;
+    ros::ServiceServer refine_service;
+    // The service has its own queue and thread: a call waiting for the worker holds none of the manager's
+    // threads (which run this nodelet's inputs and every other nodelet in the manager).
+    ros::CallbackQueue service_queue;
+    std::unique_ptr<ros::AsyncSpinner> service_spinner;
+    ros::WallTimer watchdog;
+  } inputs_{settings_, errors_};
+
+  /// The publishers (ROS publishers are thread-safe; tf_buffer is read by the worker).
+  struct Outputs {
+    std::unique_ptr<tf2_ros::Buffer> tf_buffer;
+    std::unique_ptr<tf2_ros::TransformListener> tf_listener;
+    std::unique_ptr<tf2_ros::TransformBroadcaster> tf_broadcaster;
+    ros::Publisher refined, markers, ready;
+    image_transport::Publisher overlay;
+    std::unique_ptr<diagnostic_updater::Updater> diagnostics;
+  } outputs_;
+
+  /// What the callbacks hand the worker and the worker reports back: every field under `mutex`.
+  struct Handover {
+    std::mutex mutex;
+    std::condition_variable cv;
+    std::shared_ptr<Frame> latest_frame;  // newest synchronized frame (kept for service calls)
+    bool frame_pending = false;           // latest_frame not yet processed by streaming
+    std::deque<std::shared_ptr<Request>> requests;
+    std::optional<RuntimeSettings> pending_settings;  // reconfigured values the worker takes at its next job
+    bool stop = false;
+    struct Stats {
+      long frames_synced = 0, frames_skipped = 0, frames_refined = 0, objects_refined = 0, implausible = 0,
+           undetermined = 0;
+      long extra_detections = 0;  // detections of an object beyond its max_instances
+      long requests_succeeded = 0, requests_failed = 0;  // ~refine calls answered (Refine::Response::success)
+      double last_latency = -1, latency_sum = 0, last_refine_ms = 0;
+      double ms_per_evaluation = 0;  // work_.refine_time's current cost (copied for diagnostics)
+      bool cost_measured = false;    // ... measured here, not the prior
+      ros::WallTime serving_since;   // a ~refine call is being served (streaming paused) since; zero if not
+      ros::WallTime first_refined, last_refined;
+      std::string backend = "none (configuration error)";  // the refiner's, once made
+    } stats;
+  } handover_;
+
   std::thread worker_;
-
-  // Statistics (work_mutex_).
-  struct Stats {
-    long frames_synced = 0, frames_skipped = 0, frames_refined = 0, objects_refined = 0, implausible = 0,
-         undetermined = 0;
-    long extra_detections = 0;  // detections of an object beyond its max_instances
-    long requests_succeeded = 0, requests_failed = 0;  // ~refine calls answered (Refine::Response::success)
-    double last_latency = -1, latency_sum = 0, last_refine_ms = 0;
-    double ms_per_evaluation = 0;       // refine_time_'s current cost (copied for diagnostics)
-    bool cost_measured = false;         // ... measured here, not the prior
-    ros::WallTime serving_since;        // a ~refine call is being served (streaming paused) since; zero if not
-    ros::WallTime first_refined, last_refined;
-  } stats_;
 };
 
 }  // namespace diffdope_ros

@@ -18,15 +18,15 @@ void RefinerNodelet::workerLoop() {
     std::shared_ptr<Request> job;
     std::shared_ptr<Frame> frame;
     {
-      std::unique_lock<std::mutex> lock(work_mutex_);
-      work_cv_.wait(lock, [this] { return stop_ || !requests_.empty() || frame_pending_; });
-      if (stop_) return;
-      frame = latest_frame_;
-      if (!requests_.empty()) {  // service calls first: a caller is waiting
-        job = requests_.front();
-        requests_.pop_front();
+      std::unique_lock<std::mutex> lock(handover_.mutex);
+      handover_.cv.wait(lock, [this] { return handover_.stop || !handover_.requests.empty() || handover_.frame_pending; });
+      if (handover_.stop) return;
+      frame = handover_.latest_frame;
+      if (!handover_.requests.empty()) {  // service calls first: a caller is waiting
+        job = handover_.requests.front();
+        handover_.requests.pop_front();
       } else {
-        frame_pending_ = false;
+        handover_.frame_pending = false;
       }
     }
     applyPendingSettings();
@@ -50,16 +50,16 @@ void RefinerNodelet::workerLoop() {
       }
     }
     if (job) {  // streaming is paused until the call is answered (diagnostics say so)
-      std::lock_guard<std::mutex> lock(work_mutex_);
-      stats_.serving_since = ros::WallTime::now();
+      std::lock_guard<std::mutex> lock(handover_.mutex);
+      handover_.stats.serving_since = ros::WallTime::now();
     }
     try {
       if (job) {
         const diffdope_ros::Refine::Response res = processRequest(job->request, frame);
         job->response.set_value(res);
-        std::lock_guard<std::mutex> lock(work_mutex_);
-        ++(res.success ? stats_.requests_succeeded : stats_.requests_failed);
-        if (latest_frame_ == frame) frame_pending_ = false;  // that frame is done: do not stream it again
+        std::lock_guard<std::mutex> lock(handover_.mutex);
+        ++(res.success ? handover_.stats.requests_succeeded : handover_.stats.requests_failed);
+        if (handover_.latest_frame == frame) handover_.frame_pending = false;  // that frame is done: do not stream it again
       } else {
         processStreaming(frame);
       }
@@ -71,8 +71,8 @@ void RefinerNodelet::workerLoop() {
       answer_failure("refinement failed with an unknown exception");
     }
     if (job) {
-      std::lock_guard<std::mutex> lock(work_mutex_);
-      stats_.serving_since = ros::WallTime();
+      std::lock_guard<std::mutex> lock(handover_.mutex);
+      handover_.stats.serving_since = ros::WallTime();
     }
   }
 }
@@ -80,8 +80,8 @@ void RefinerNodelet::workerLoop() {
 void RefinerNodelet::applyPendingSettings() {
   std::optional<RuntimeSettings> settings;
   {
-    std::lock_guard<std::mutex> lock(work_mutex_);
-    settings.swap(pending_settings_);
+    std::lock_guard<std::mutex> lock(handover_.mutex);
+    settings.swap(handover_.pending_settings);
   }
   if (!settings) return;
   try {
@@ -92,14 +92,14 @@ void RefinerNodelet::applyPendingSettings() {
     errors_.error("reconfigure", std::string("reconfigured values not applied: ") + e.what());
     try {  // back to the values in force (valid: they were accepted before)
       for (auto& slot : slots_)
-        if (slot->tracks) slot->tracks->set_options(track_options_);
+        if (slot->tracks) slot->tracks->set_options(work_.track_options);
     } catch (const std::exception&) {
     }
     return;
   }
-  refiner_options_ = settings->refiner;
-  track_options_ = settings->track;
-  publish_implausible_ = settings->publish_implausible;
+  work_.refiner_options = settings->refiner;
+  work_.track_options = settings->track;
+  work_.publish_implausible = settings->publish_implausible;
 }
 
 std::vector<TargetObject> RefinerNodelet::targetObjects() const {
@@ -119,8 +119,8 @@ void RefinerNodelet::processStreaming(const std::shared_ptr<const Frame>& frame)
   // skipped is logged; only a ~refine call's reply lists it too.)
   if (!targets.seeds.empty())
     refineAndPublish(*frame, targets.seeds,
-                     targets.all_steady ? diffdope::tracked_options(refiner_options_, track_options_)
-                                        : refiner_options_,
+                     targets.all_steady ? diffdope::tracked_options(work_.refiner_options, work_.track_options)
+                                        : work_.refiner_options,
                      nullptr);
   updateTrackingFlags(stamp);
 }
