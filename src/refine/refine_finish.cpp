@@ -62,11 +62,11 @@ void RefineRun::polish(Renderer& renderer, RefineResult& res) {
   int stale = 0;
   for (int k = 0; k <= iters; ++k) {
     if (k == 0) {  // every run starts at the result: one evaluation gives them all their first gradient
-      evaluate(renderer, {res.pose}, loss_, true, v, true);
+      evaluate_fine(renderer, {res.pose}, loss_, Gradients::kCompute, v);
       const LossValue first = v[0];
       v.assign(poses.size(), first);
     } else {
-      evaluate(renderer, poses, loss_, k < iters, v, true);
+      evaluate_fine(renderer, poses, loss_, k < iters ? Gradients::kCompute : Gradients::kSkip, v);
     }
     const double decay = std::pow(o.lr_decay, double(k) / iters);
     const double before = res.loss.total;
@@ -120,7 +120,7 @@ void RefineRun::newton(Renderer& renderer, RefineResult& res) {
   std::vector<Vector6d> gradients(kSecantProbePoses);
   for (int round = 0; round < newton_rounds_ && h > 0; ++round) {
     const Eigen::Vector3d pivot = res.pose * pivot_model_;
-    evaluate(renderer, secant_probe_poses(res.pose, LinvT, h, pivot), loss_, true, v, true);
+    evaluate_fine(renderer, secant_probe_poses(res.pose, LinvT, h, pivot), loss_, Gradients::kCompute, v);
     const bool probed = std::all_of(v.begin(), v.end(), [](const LossValue& x) { return std::isfinite(x.total); });
     Vector6d step = Vector6d::Zero();  // (zero: a probe left the image, or nothing curves upwards)
     const double trust = kNewtonTrustPerReach * h;
@@ -133,7 +133,7 @@ void RefineRun::newton(Renderer& renderer, RefineResult& res) {
     double gain = 0;
     if (!step.isZero()) {
       for (const double share : kNewtonStepShares) poses.push_back(twist_about(res.pose, share * (LinvT * step), pivot));
-      evaluate(renderer, poses, loss_, false, tried, true);
+      evaluate_fine(renderer, poses, loss_, Gradients::kSkip, tried);
       for (size_t j = 1; j < poses.size(); ++j)
         if (std::isfinite(tried[j].total) && !(tried[best].total <= tried[j].total)) best = j;  // (never a non-finite one)
       gain = residuals * (res.loss.total - tried[best].total) / std::max(res.loss.total, 1e-12);
@@ -214,7 +214,7 @@ void RefineRun::derive_pixels_at_result(Renderer& renderer, RefineResult& res) {
   // alignment, the Newton steps and the scores weigh them. Losses under other pixels do not compare: the result's
   // and the starts' again (a start no run beat stays the result).
   std::vector<LossValue> v;
-  evaluate(renderer, {res.pose}, loss_, false, v, true);
+  evaluate_fine(renderer, {res.pose}, loss_, Gradients::kSkip, v);
   res.loss = v[0];
   weigh_starts(renderer, res);
 }
@@ -238,7 +238,7 @@ void RefineRun::weigh_starts(Renderer& renderer, RefineResult& res) {
   std::vector<LossValue> v;
   const int starts = std::min(int(initials_.size()), options_.batch_size);
   const std::vector<Pose> started(initials_.begin(), initials_.begin() + starts);
-  evaluate(renderer, started, loss_, false, v, true);
+  evaluate_fine(renderer, started, loss_, Gradients::kSkip, v);
   const size_t j = size_t(std::min_element(v.begin(), v.end(), [](auto& a, auto& b) { return a.total < b.total; }) - v.begin());
   res.initial_loss = v[j].total;
   // The start is a pose seen too (at k = 0, at the coarse scale): when no run's fine-phase best beats it (a
@@ -284,7 +284,7 @@ void RefineRun::align_result_print(Renderer& renderer, RefineResult& res, PrintA
   LossOptions with_print = loss_;
   with_print.weight_texture = 1.0;
   const PrintEvaluator evaluate_print = [&](const std::vector<Pose>& poses, std::vector<LossValue>& out) {
-    evaluate(renderer, poses, with_print, false, out, true);
+    evaluate_fine(renderer, poses, with_print, Gradients::kSkip, out);
   };
   Pose aligned = res.pose;
   bool turned = false;
@@ -295,7 +295,7 @@ void RefineRun::align_result_print(Renderer& renderer, RefineResult& res, PrintA
   }
   if (!turned) return;
   std::vector<LossValue> v;
-  evaluate(renderer, {aligned}, loss_, false, v, true);
+  evaluate_fine(renderer, {aligned}, loss_, Gradients::kSkip, v);
   const double angle = Eigen::AngleAxisd(res.pose.R.transpose() * aligned.R).angle();
   // The turns of several axes together may cost no more than one may (kPrintLossTolerance), and the print's
   // registration must not contradict the turn, and must register where it turned (turn_is_supported).

@@ -113,7 +113,7 @@ RefineRun::RefineRun(const RefinerOptions& o, const std::vector<RefineView>& vie
 }
 
 RefineRun::Level RefineRun::make_level(const RefineView& view, double scale, const Observation* shared,
-                                       bool fine) const {
+                                       Phase phase) const {
   const Observation& observed = view.observed;
   Level l;
   l.cam = scaled_camera(view.camera, scale);
@@ -127,7 +127,7 @@ RefineRun::Level RefineRun::make_level(const RefineView& view, double scale, con
   }
   // The paper's edge term: Canny edges of the observed image, computed at this scale.
   if (loss_.weight_edges > 0 && l.obs.has_rgb() && !l.obs.has_edges()) l.obs.edges = observed_edges(l.obs.rgb);
-  if (uses_texture(options_, fine) && l.obs.has_rgb() && !l.obs.has_texture())
+  if (uses_texture(options_, phase) && l.obs.has_rgb() && !l.obs.has_texture())
     l.obs.texture = observed_texture(l.obs.rgb, loss_.texture_epsilon);
   // Without a mask: the detector's box, or a window around the initial projections (the mask term then has no
   // observation).
@@ -149,12 +149,12 @@ void RefineRun::set_up_levels(const std::vector<RefineView>& views, const Observ
   switch_at_ = coarse_iterations(o);
   const bool given_mask = views.front().observed.has_mask();
   for (const RefineView& view : views) {
-    fine_.push_back(make_level(view, o.image_scale, scaled_frame, true));
+    fine_.push_back(make_level(view, o.image_scale, scaled_frame, Phase::kFine));
     if (given_mask && cv::countNonZero(fine_.back().obs.mask > 0) == 0)
       throw std::invalid_argument(views.size() > 1 ? "refine: the object mask of view " +
                                                          std::to_string(fine_.size() - 1) + " is empty"
                                                    : "refine: the object mask is empty");
-    if (switch_at_ > 0) coarse_.push_back(make_level(view, o.image_scale * o.coarse_scale, coarse_frame, false));
+    if (switch_at_ > 0) coarse_.push_back(make_level(view, o.image_scale * o.coarse_scale, coarse_frame, Phase::kCoarse));
   }
 }
 
@@ -281,15 +281,15 @@ void RefineRun::update_object_pixels(Renderer& renderer) {
   }
 }
 
-void RefineRun::evaluate(Renderer& renderer, const std::vector<Pose>& poses, const LossOptions& loss,
-                         bool with_gradient, std::vector<LossValue>& out, bool fine) {
+void RefineRun::evaluate_fine(Renderer& renderer, const std::vector<Pose>& poses, const LossOptions& loss,
+                              Gradients gradients, std::vector<LossValue>& out) {
   evaluations_ += long(poses.size() * meshes_.size());
-  evaluate_views(renderer, poses, loss, with_gradient, out, fine);
+  evaluate_views(renderer, poses, loss, gradients == Gradients::kCompute, out, Phase::kFine);
 }
 
 void RefineRun::evaluate_views(Renderer& renderer, const std::vector<Pose>& poses, const LossOptions& loss,
-                               bool with_gradient, std::vector<LossValue>& out, bool fine) {
-  const auto level = [&](size_t v) -> const Level& { return fine || !coarse() ? fine_[v] : coarse_[v]; };
+                               bool with_gradient, std::vector<LossValue>& out, Phase phase) {
+  const auto level = [&](size_t v) -> const Level& { return phase == Phase::kFine ? fine_[v] : coarse_[v]; };
   if (meshes_.size() == 1) {
     renderer.evaluate(level(0).cam, *meshes_[0], level(0).obs, poses, loss, with_gradient, out);
     return;
@@ -359,7 +359,8 @@ RefineRun::Step RefineRun::next_step(Renderer& renderer) {
 }
 
 void RefineRun::evaluate_step(Renderer& renderer, const Step& step, std::vector<LossValue>& values) {
-  evaluate_views(renderer, step.poses, step.loss, step.with_gradient, values, false);  // (absorb() counts it)
+  // (absorb() counts it)
+  evaluate_views(renderer, step.poses, step.loss, step.with_gradient, values, coarse() ? Phase::kCoarse : Phase::kFine);
 }
 
 void RefineRun::add_scan_candidates(const Step& scan, const std::vector<LossValue>& values) {

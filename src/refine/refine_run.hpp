@@ -1,12 +1,13 @@
 #pragma once
-// One object's refinement (Algorithm 1) as a state machine, so Refiner::refine() can drive one object and
-// Refiner::refine_all() several in lockstep, every iteration's hypotheses of all objects in one renderer call
-// (internal header).
+// One object's refinement (Algorithm 1) as a state machine: the Refiner's one driver steps every object's run in
+// lockstep, each iteration's hypotheses of all objects in one renderer call (internal header). Protocol: while
+// !done(), next_step(), evaluate the step (the driver, or evaluate_step()), absorb(); then finish().
 #include <chrono>
 #include <functional>
 #include <vector>
 
 #include "diffdope/refiner.hpp"
+#include "refine/refine_schedule.hpp"
 
 namespace diffdope {
 
@@ -80,10 +81,11 @@ class RefineRun {
   /// runs (after the scan: adds the candidate run, without a step). `on_iteration`: Refiner::on_iteration.
   void absorb(const Step& step, const std::vector<LossValue>& values,
               const std::function<void(int, int, double)>& on_iteration);
-  /// Evaluates `poses` in every view at this iteration's scale (`fine`: at the fine scale) and gives each pose
-  /// the mean over the views (terms, total and gradient: the views share the camera frame the gradient is in).
-  void evaluate(Renderer& renderer, const std::vector<Pose>& poses, const LossOptions& loss, bool with_gradient,
-                std::vector<LossValue>& out, bool fine = false);
+  enum class Gradients { kSkip, kCompute };
+  /// Evaluates `poses` in every view at the fine scale and gives each pose the mean over the views (terms, total
+  /// and gradient: the views share the camera frame the gradient is in). Counted in RefineResult::evaluations.
+  void evaluate_fine(Renderer& renderer, const std::vector<Pose>& poses, const LossOptions& loss,
+                     Gradients gradients, std::vector<LossValue>& out);
   /// Winner and quality scores (renders the refined pose once per view).
   RefineResult finish(Renderer& renderer);
   /// Iterations of the last descent from the chosen pose (RefinerOptions::polish_iterations; 0: none).
@@ -114,7 +116,7 @@ class RefineRun {
   std::vector<Level> fine_, coarse_;  // per view
   // The constructor's steps (after the input's checks): the images at each scale, the loss the input allows, the
   // runs with their learning rates.
-  Level make_level(const RefineView& view, double scale, const Observation* shared, bool fine) const;
+  Level make_level(const RefineView& view, double scale, const Observation* shared, Phase phase) const;
   void set_up_levels(const std::vector<RefineView>& views, const Observation* scaled_frame,
                      const Observation* coarse_frame);
   void set_up_loss(const std::vector<RefineView>& views);
@@ -195,9 +197,9 @@ class RefineRun {
   /// Curvature, covariance, convergence, verdict and time of the result.
   void judge_result(Renderer& renderer, RefineResult& res, int rendered_pixels);
   int scan_at_ = -1;         // the iteration whose step is preceded by the scan (-1: none)
-  /// evaluate() without counting (the steps are counted by absorb()).
+  /// The evaluation in `phase`'s images, not counted (evaluate_fine() counts; absorb() counts the steps).
   void evaluate_views(Renderer& renderer, const std::vector<Pose>& poses, const LossOptions& loss,
-                      bool with_gradient, std::vector<LossValue>& out, bool fine);
+                      bool with_gradient, std::vector<LossValue>& out, Phase phase);
   /// Derives the object's pixels when they are due (next_step()).
   void update_object_pixels(Renderer& renderer);
   /// The scan's candidates: a new run from each turn some run prefers (absorb()).

@@ -28,18 +28,18 @@ int halvings_due(int k, int iters) {
   return due;
 }
 
-bool uses_texture(const RefinerOptions& o, bool fine) {
+bool uses_texture(const RefinerOptions& o, Phase phase) {
   if (o.loss.weight_texture > 0) return true;
-  return fine && o.explore_tolerance > 0 && (o.explore_texture_weight > 0 || o.print_search > 0);
+  return phase == Phase::kFine && o.explore_tolerance > 0 && (o.explore_texture_weight > 0 || o.print_search > 0);
 }
 
 Observation scale_frame(const Camera& camera, const Observation& frame, const RefinerOptions& o, double scale,
-                        bool fine) {
+                        Phase phase) {
   Observation f = frame.with_mask(cv::Mat());
   f.validate(camera);
   if (scale != 1.0) f = f.resized(scaled_camera(camera, scale));
   if (o.loss.weight_edges > 0 && f.has_rgb() && !f.has_edges()) f.edges = observed_edges(f.rgb);
-  if (uses_texture(o, fine) && f.has_rgb()) f.texture = observed_texture(f.rgb, o.loss.texture_epsilon);
+  if (uses_texture(o, phase) && f.has_rgb()) f.texture = observed_texture(f.rgb, o.loss.texture_epsilon);
   return f;
 }
 

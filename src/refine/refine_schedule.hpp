@@ -27,12 +27,15 @@ int scan_iteration(const RefinerOptions& o);
 /// them).
 int halvings_due(int k, int iters);
 
-/// Whether the loss, the shape scan or the print alignment compares texture gradients at this scale
+/// The two scales of a refinement: the coarse phase's (RefinerOptions::coarse_fraction) and the fine one.
+enum class Phase { kCoarse, kFine };
+
+/// Whether the loss, the shape scan or the print alignment compares texture gradients in `phase`
 /// (observed_texture() is then needed). The scan and the alignment run at the fine scale only.
-bool uses_texture(const RefinerOptions& o, bool fine);
+bool uses_texture(const RefinerOptions& o, Phase phase);
 
 /// The frame's rgb / depth at `scale`, with the paper's edge map when the loss uses it.
 Observation scale_frame(const Camera& camera, const Observation& frame, const RefinerOptions& o, double scale,
-                        bool fine);
+                        Phase phase);
 
 }  // namespace diffdope

@@ -411,9 +411,9 @@ std::vector<RefineResult> Refiner::refine_pass(const RefinerOptions& options, co
   // reported by each object's own check below.
   std::optional<Observation> fine_frame, coarse_frame;
   try {
-    fine_frame = scale_frame(camera, frame, options, options.image_scale, true);
+    fine_frame = scale_frame(camera, frame, options, options.image_scale, Phase::kFine);
     if (coarse_iterations(options) > 0)
-      coarse_frame = scale_frame(camera, frame, options, options.image_scale * options.coarse_scale, false);
+      coarse_frame = scale_frame(camera, frame, options, options.image_scale * options.coarse_scale, Phase::kCoarse);
   } catch (const std::invalid_argument&) {
   }
   const SharedImages shared{fine_frame ? &*fine_frame : nullptr, coarse_frame ? &*coarse_frame : nullptr};

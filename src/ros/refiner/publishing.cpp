@@ -62,7 +62,8 @@ std::vector<diffdope_ros::RefinedPose> RefinerNodelet::publishResults(
       p.pose.header = frame.header;
       return p;
     };
-    undetermined += diffdope::verdict_state(r) == diffdope::VerdictState::kUndetermined;
+    const diffdope::VerdictState verdict = diffdope::verdict_state(r);
+    undetermined += verdict == diffdope::VerdictState::kUndetermined;
     if (!r.error.empty()) {  // in ~refined_poses with its reason, and nowhere else
       errors_.error("refine_" + in.name, "object '" + in.name + "' not refined: " + r.error);
       if (skipped) skipped->push_back(in.name + " (" + r.error + ")");
@@ -75,7 +76,7 @@ std::vector<diffdope_ros::RefinedPose> RefinerNodelet::publishResults(
     // No spin / flip of a symmetric object between frames.
     const diffdope::Pose refined = s.tracks->track(k).reported_pose(r.pose, s.mesh->symmetry);
     if (s.tracks->report(k, refined, r.plausible, frame.header.stamp.toSec())) reportLostTrack(s, k);
-    implausible += diffdope::verdict_state(r) == diffdope::VerdictState::kImplausible;
+    implausible += verdict == diffdope::VerdictState::kImplausible;
     diffdope_ros::RefinedPose p = message(seed, refined);
     out.push_back(p);
     if (!r.plausible && !work_.publish_implausible) continue;  // scores still go out in ~refined_poses

@@ -44,33 +44,25 @@ namespace {
 
 /// The ~parameters named in cfg/Refiner.cfg that are set, each read once with its type; the first of the wrong
 /// type goes to `error` (unless it holds one already).
+/// The ~parameters among `names` that are set, each read as a `Value`; the first of the wrong type is `error`.
+template <typename Value, typename Param>
+void read_typed(const ros::NodeHandle& pnh, const std::vector<Param>& names, const char* type,
+                std::vector<Param>& out, std::string& error) {
+  for (Param p : names) {
+    if (!pnh.hasParam(p.name)) continue;
+    Value value{};
+    if (pnh.getParam(p.name, value)) p.value = value, out.push_back(p);
+    else if (error.empty()) error = "~" + p.name + ": expected " + type;
+  }
+}
+
 dynamic_reconfigure::Config read_runtime_parameters(const ros::NodeHandle& pnh, std::string& error) {
   dynamic_reconfigure::Config names, out;
   RefinerConfig::__getDefault__().__toMessage__(names);
-  const auto wrong_type = [&](const std::string& name, const char* type) {
-    if (error.empty()) error = "~" + name + ": expected " + type;
-  };
-  for (auto p : names.ints)
-    if (pnh.hasParam(p.name)) {
-      if (pnh.getParam(p.name, p.value)) out.ints.push_back(p);
-      else wrong_type(p.name, "an integer");
-    }
-  for (auto p : names.doubles)
-    if (pnh.hasParam(p.name)) {
-      if (pnh.getParam(p.name, p.value)) out.doubles.push_back(p);
-      else wrong_type(p.name, "a number");
-    }
-  for (auto p : names.bools) {
-    bool value = false;
-    if (!pnh.hasParam(p.name)) continue;
-    if (pnh.getParam(p.name, value)) p.value = value, out.bools.push_back(p);
-    else wrong_type(p.name, "true or false");
-  }
-  for (auto p : names.strs)
-    if (pnh.hasParam(p.name)) {
-      if (pnh.getParam(p.name, p.value)) out.strs.push_back(p);
-      else wrong_type(p.name, "a string");
-    }
+  read_typed<int>(pnh, names.ints, "an integer", out.ints, error);
+  read_typed<double>(pnh, names.doubles, "a number", out.doubles, error);
+  read_typed<bool>(pnh, names.bools, "true or false", out.bools, error);
+  read_typed<std::string>(pnh, names.strs, "a string", out.strs, error);
   return out;
 }
 
