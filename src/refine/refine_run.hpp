@@ -44,8 +44,7 @@ class RefineRun {
   /// the pose (Refiner::refine_views()). `scaled_frame` (refine_all, one view): the frame's rgb / depth / edges
   /// already at the refiner's scale, shared by the objects; then only the mask is resized. `coarse_frame`
   /// likewise at image_scale * coarse_scale (see RefinerOptions::coarse_fraction). `shape_turns`: the
-  /// model-frame turns the shape scan tries on every run, and that weigh_shape_turns() weighs at the result
-  /// (RefinerOptions::explore_tolerance; empty: neither).
+  /// model-frame turns the shape scan tries on every run (RefinerOptions::explore_tolerance; empty: no scan).
   /// `pivot_model`: the model point the steps turn about (null: the first view's mesh centre).
   RefineRun(const RefinerOptions& options, const std::vector<RefineView>& views, const std::vector<Pose>& initials,
             std::vector<Pose> shape_turns = {}, const Observation* scaled_frame = nullptr,
