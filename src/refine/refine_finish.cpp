@@ -314,11 +314,8 @@ double print_jump_bar(double angle) { return kClearPrint * (1.0 + std::abs(angle
 void RefineRun::weigh_shape_turns(Renderer& renderer, RefineResult& res, PrintAtPose& print) {
   // The scan compared the shape-equivalent turns early, by a loss that barely sees the print, and a hard start
   // (or a detector's cuboid, ambiguous by the same turns) can converge on a box's back face. Between such poses
-  // neither silhouette nor depth decides: at the converged result the print does, clearly (kClearPrint). Only
-  // with a mask or depth: they hold the other degrees of freedom while it converges from the turn (with RGB alone
-  // the colour term would be the print comparison itself, as for the print alignment).
-  const bool held = has_mask_ || fine_[0].obs.has_depth();
-  if (turns_.empty() || !held || !(options_.min_print_significance > 0) || !std::isfinite(res.loss.total)) return;
+  // neither silhouette nor depth decides: at the converged result the print does, clearly (kClearPrint).
+  if (turns_.empty() || !(options_.min_print_significance > 0) || !std::isfinite(res.loss.total)) return;
   const double z = print.at(renderer, res.pose);
   if (!std::isfinite(z)) return;
   int best = -1;

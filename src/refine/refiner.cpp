@@ -436,7 +436,7 @@ std::vector<RefineResult> Refiner::refine_pass(const RefinerOptions& options, co
       out[k] = failed_result(t.initial, e.what());
     }
   }
-  // (Without the shared frame, each run evaluates the images it resized itself.)
+  if (!shared.fine) return out;  // every object has failed its check
   std::vector<RefineResult> results = run_to_results(*renderer_, runs, shared, progress);
   for (size_t k = 0; k < runs.size(); ++k)
     if (out[k].error.empty()) out[k] = std::move(results[k]);

@@ -439,12 +439,6 @@ TEST(Refiner, AResultOnABoxsBackFaceIsTurnedToTheFaceThePrintShows) {
   const RefineResult kept = Refiner(o).refine(cam, obs, box, back);
   EXPECT_GT(angle_between(kept.pose.R, truth.R), 170.0);
   EXPECT_EQ(kept.shape_turn, 0.0);
-  // With RGB alone nothing holds the other degrees of freedom while it converges from a turn: not weighed.
-  o.min_print_significance = RefinerOptions().min_print_significance;
-  Observation rgb_only = obs;
-  rgb_only.depth = cv::Mat();
-  rgb_only.mask = cv::Mat();
-  EXPECT_EQ(Refiner(o).refine(cam, rgb_only, box, back).shape_turn, 0.0);
   // From the truth, no turn is preferred.
   o.min_print_significance = RefinerOptions().min_print_significance;
   const RefineResult right = Refiner(o).refine(cam, obs, box, truth);
