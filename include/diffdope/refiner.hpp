@@ -208,7 +208,6 @@ struct RefineResult {
   int scan_turns = 0;                 // candidates the shape scan (explore_tolerance) added: runs from turned poses
   bool scan_taken = false;            // the result is such a candidate, not the start's own basin (the evidence
                                       // was clear: jump_is_supported() in src/refine/refine_run.hpp)
-  double shape_turn = 0;              // radians of the shape-equivalent turn the print preferred at the end (0: none)
   double print_turn = 0;              // radians the print alignment (print_search) turned the result by (0: none;
                                       // the sum of both turns' angles when it ran again after the Newton
                                       // steps); a turn may raise the loss up to kPrintLossTolerance (2 %) above
@@ -400,8 +399,7 @@ class Refiner {
 /// Hypothesis evaluations (one render + loss + gradient of one pose) that refining one object with `o` costs at
 /// most: the runs of every iteration, less those successive halving drops, the shape scan as for a shape with
 /// the most turns (kMaxShapeTurns; an asymmetric one has none) and its candidate run, the polish, the print
-/// alignment and the Newton steps (each twice: they run again when the steps move far), the result's shape turns
-/// weighed by the print (and the same stages from the one it prefers) and the final scoring.
+/// alignment and the Newton steps (each twice: they run again when the steps move far) and the final scoring.
 /// An early stop (of the descent, the polish or the Newton rounds) only lowers it; a retry of a rejected result
 /// (retry_turn) doubles it for that object. The unit of RefineTimeEstimator (refine_time.hpp).
 long planned_evaluations(const RefinerOptions& o);

@@ -41,7 +41,7 @@ bool jump_is_supported(const JumpEvidence& from, const JumpEvidence& to, double 
   if (weigh_print && std::isfinite(from.print) && !std::isfinite(to.print)) return false;  // the print is lost
   const bool weighed = weigh_print && std::isfinite(from.print) && std::isfinite(to.print);
   if (weighed && to.print < from.print - kPrintContradiction) return false;
-  const double need = print_jump_bar(angle);
+  const double need = kClearPrint * (1.0 + std::abs(angle) / M_PI);
   if (weighed && to.print >= need && to.print - std::max(from.print, 0.0) >= need) return true;
   return to.loss < (1.0 - jump_margin(angle)) * from.loss;
 }
@@ -190,7 +190,6 @@ RefineResult RefineRun::finish(Renderer& renderer) {
   derive_pixels_at_result(renderer, res);
   polish(renderer, res);
   align_print_and_step(renderer, res, print);
-  weigh_shape_turns(renderer, res, print);
   // Of the poses a declared symmetry makes equivalent, the one nearest the start: a track does not spin.
   if (meshes_.size() == 1) res.pose = meshes_.front()->symmetry.nearest_equivalent(res.pose, res.initial_pose.R);
   judge_result(renderer, res, score_views(renderer, res));
@@ -307,39 +306,6 @@ void RefineRun::align_result_print(Renderer& renderer, RefineResult& res, PrintA
   res.pose = aligned;
   res.loss = v[0];
   print.set(aligned, z_aligned);
-}
-
-double print_jump_bar(double angle) { return kClearPrint * (1.0 + std::abs(angle) / M_PI); }
-
-void RefineRun::weigh_shape_turns(Renderer& renderer, RefineResult& res, PrintAtPose& print) {
-  // The scan compared the shape-equivalent turns early, by a loss that barely sees the print, and a hard start
-  // (or a detector's cuboid, ambiguous by the same turns) can converge on a box's back face. Between such poses
-  // neither silhouette nor depth decides: at the converged result the print does, clearly (kClearPrint).
-  if (turns_.empty() || !(options_.min_print_significance > 0) || !std::isfinite(res.loss.total)) return;
-  const double z = print.at(renderer, res.pose);
-  if (!std::isfinite(z)) return;
-  int best = -1;
-  double best_z = z;
-  for (size_t t = 0; t < turns_.size(); ++t) {
-    const double z_t = print_significance(renderer, res.pose * turns_[t]);
-    if (z_t > best_z) best = int(t), best_z = z_t;
-  }
-  if (best < 0) return;
-  // The turn the print prefers, converged as the result was (polish, print alignment, Newton steps).
-  RefineResult turned = res;
-  turned.pose = res.pose * turns_[size_t(best)];
-  std::vector<LossValue> v;
-  evaluate_fine(renderer, {turned.pose}, loss_, Gradients::kSkip, v);
-  turned.loss = v[0];
-  PrintAtPose turned_print(*this);
-  polish(renderer, turned);
-  align_print_and_step(renderer, turned, turned_print);
-  const double z_turned = turned_print.at(renderer, turned.pose);
-  if (!std::isfinite(turned.loss.total) || !(z_turned >= kClearPrint && z_turned - std::max(z, 0.0) >= kClearPrint))
-    return;
-  turned.shape_turn = Eigen::AngleAxisd(res.pose.R.transpose() * turned.pose.R).angle();
-  res = std::move(turned);
-  print.set(res.pose, z_turned);
 }
 
 int RefineRun::score_views(Renderer& renderer, RefineResult& res) {
