@@ -4,6 +4,7 @@
 // plain gradient descent, no momentum; the run with the lowest loss wins.
 #include <cstdint>
 #include <functional>
+#include <limits>
 #include <map>
 #include <optional>
 #include <string>
@@ -208,6 +209,11 @@ struct RefineResult {
   int scan_turns = 0;                 // candidates the shape scan (explore_tolerance) added: runs from turned poses
   bool scan_taken = false;            // the result is such a candidate, not the start's own basin (the evidence
                                       // was clear: jump_is_supported() in src/refine/refine_run.hpp)
+  double shape_turn = 0;              // radians of the shape-equivalent turn the print preferred at the end (0: none)
+  double rival_print = std::numeric_limits<double>::quiet_NaN();  // the print's significance at the result's
+                                      // best-registering shape-equivalent turn, converged from (NaN: not
+                                      // measured); a rival that registers as well as the result leaves its face
+                                      // undetermined, and the verdict rejects it
   double print_turn = 0;              // radians the print alignment (print_search) turned the result by (0: none;
                                       // the sum of both turns' angles when it ran again after the Newton
                                       // steps); a turn may raise the loss up to kPrintLossTolerance (2 %) above
@@ -399,7 +405,8 @@ class Refiner {
 /// Hypothesis evaluations (one render + loss + gradient of one pose) that refining one object with `o` costs at
 /// most: the runs of every iteration, less those successive halving drops, the shape scan as for a shape with
 /// the most turns (kMaxShapeTurns; an asymmetric one has none) and its candidate run, the polish, the print
-/// alignment and the Newton steps (each twice: they run again when the steps move far) and the final scoring.
+/// alignment and the Newton steps (each twice: they run again when the steps move far), the result's shape turns
+/// weighed by the print (and the same stages from the one it prefers) and the final scoring.
 /// An early stop (of the descent, the polish or the Newton rounds) only lowers it; a retry of a rejected result
 /// (retry_turn) doubles it for that object. The unit of RefineTimeEstimator (refine_time.hpp).
 long planned_evaluations(const RefinerOptions& o);

@@ -64,6 +64,9 @@ struct VerdictEvidence {
   double mask_iou = -1;       // -1: no observed mask
   double depth_inliers = -1;  // -1: no depth
   double print_significance = std::numeric_limits<double>::quiet_NaN();  // NaN: no print measured
+  /// The print's significance at the pose's best-registering shape-equivalent turn (a box's back face, a can's
+  /// far end), converged from; NaN: not measured.
+  double rival_print_significance = std::numeric_limits<double>::quiet_NaN();
 };
 
 struct Verdict {
@@ -81,6 +84,8 @@ struct Verdict {
 /// min_print_significance (standard deviations; 0 = the print is not weighed). A print below its bar contradicts
 /// the pose. One that lines up, but less than clearly (z < kClearPrint), raises the shape's thresholds t towards
 /// 1: to t + (1 - t) / 2 at the bar, t at kClearPrint, linearly between (a weak print leaves more to the shape).
+/// A rival turn whose print registers at least as well (and above the bar) contradicts the pose: shape and depth
+/// cannot tell the two apart, and the print does not prefer this one.
 Verdict judge(const VerdictEvidence& e, double min_mask_iou, double min_depth_inliers, double min_print_significance);
 
 }  // namespace diffdope

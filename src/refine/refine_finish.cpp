@@ -41,7 +41,7 @@ bool jump_is_supported(const JumpEvidence& from, const JumpEvidence& to, double 
   if (weigh_print && std::isfinite(from.print) && !std::isfinite(to.print)) return false;  // the print is lost
   const bool weighed = weigh_print && std::isfinite(from.print) && std::isfinite(to.print);
   if (weighed && to.print < from.print - kPrintContradiction) return false;
-  const double need = kClearPrint * (1.0 + std::abs(angle) / M_PI);
+  const double need = print_jump_bar(angle);
   if (weighed && to.print >= need && to.print - std::max(from.print, 0.0) >= need) return true;
   return to.loss < (1.0 - jump_margin(angle)) * from.loss;
 }
@@ -190,6 +190,7 @@ RefineResult RefineRun::finish(Renderer& renderer) {
   derive_pixels_at_result(renderer, res);
   polish(renderer, res);
   align_print_and_step(renderer, res, print);
+  weigh_shape_turns(renderer, res, print);
   // Of the poses a declared symmetry makes equivalent, the one nearest the start: a track does not spin.
   if (meshes_.size() == 1) res.pose = meshes_.front()->symmetry.nearest_equivalent(res.pose, res.initial_pose.R);
   judge_result(renderer, res, score_views(renderer, res));
@@ -308,6 +309,52 @@ void RefineRun::align_result_print(Renderer& renderer, RefineResult& res, PrintA
   print.set(aligned, z_aligned);
 }
 
+double print_jump_bar(double angle) { return kClearPrint * (1.0 + std::abs(angle) / M_PI); }
+
+void RefineRun::weigh_shape_turns(Renderer& renderer, RefineResult& res, PrintAtPose& print) {
+  // The scan compared the shape-equivalent turns early, by a loss that barely sees the print, and a hard start
+  // (or a detector's cuboid, ambiguous by the same turns) can converge on a box's back face. Between such poses
+  // silhouette and depth cannot decide; the print and the colour can, once converged. Only with a mask or depth:
+  // they hold the other degrees of freedom while it converges from the turn (with RGB alone the colour term would
+  // be the print comparison itself, as for the print alignment).
+  const bool held = has_mask_ || fine_[0].obs.has_depth();
+  if (turns_.empty() || !held || !(options_.min_print_significance > 0) || !std::isfinite(res.loss.total)) return;
+  const double z = print.at(renderer, res.pose);
+  if (!std::isfinite(z)) return;
+  int best = -1;
+  double best_z = z;
+  for (size_t t = 0; t < turns_.size(); ++t) {
+    const double z_t = print_significance(renderer, res.pose * turns_[t]);
+    if (z_t > best_z) best = int(t), best_z = z_t;
+  }
+  if (best < 0) return;
+  // The turn the print prefers, converged as the result was (polish, print alignment, Newton steps).
+  RefineResult turned = res;
+  turned.pose = res.pose * turns_[size_t(best)];
+  std::vector<LossValue> v;
+  evaluate_fine(renderer, {turned.pose}, loss_, Gradients::kSkip, v);
+  turned.loss = v[0];
+  PrintAtPose turned_print(*this);
+  polish(renderer, turned);
+  align_print_and_step(renderer, turned, turned_print);
+  const double z_turned = turned_print.at(renderer, turned.pose);
+  if (!std::isfinite(turned.loss.total) || !std::isfinite(z_turned)) return;
+  const double turn = Eigen::AngleAxisd(res.pose.R.transpose() * turned.pose.R).angle();
+  // It replaces the result when its print registers clearly better: converged, silhouette and depth fit both alike.
+  if (z_turned >= kClearPrint && z_turned - std::max(z, 0.0) >= kClearPrint) {
+    turned.shape_turn = turn;
+    turned.rival_print = z;
+    res = std::move(turned);
+    print.set(res.pose, z_turned);
+    return;
+  }
+  // Otherwise it is the result's rival when it stayed a pose of its own (one that converged back nearer the
+  // result than to where it was turned, as the print alignment undoes a small turn about a bottle's axis, is the
+  // result again) and the loss does not prefer the result: the verdict weighs their prints.
+  const double turned_by = Eigen::AngleAxisd(turns_[size_t(best)].R).angle();
+  if (turn > 0.5 * turned_by && turned.loss.total <= res.loss.total) res.rival_print = z_turned;
+}
+
 int RefineRun::score_views(Renderer& renderer, RefineResult& res) {
   // Quality scores at the refined pose, per view; the result's are the weakest view's.
   const bool one_view = meshes_.size() == 1;
@@ -384,7 +431,10 @@ void RefineRun::judge_result(Renderer& renderer, RefineResult& res, int rendered
   evidence.mask_iou = res.mask_iou;
   evidence.depth_inliers = res.depth_inliers;
   // A continuous declared symmetry turns the print with the object: it cannot be registered along that axis.
-  if (one_view && mesh0.symmetry.continuous.empty()) evidence.print_significance = res.print.significance();
+  if (one_view && mesh0.symmetry.continuous.empty()) {
+    evidence.print_significance = res.print.significance();
+    evidence.rival_print_significance = res.rival_print;
+  }
   const Verdict verdict = judge(evidence, o.min_mask_iou, o.min_depth_inliers, o.min_print_significance);
   res.judged = verdict.judged;
   res.plausible = std::isfinite(res.loss.total) && verdict.plausible;

@@ -33,6 +33,9 @@ bool jump_is_supported(const JumpEvidence& from, const JumpEvidence& to, double 
 /// from converged compares labels drawn out of place). Always when the print is not weighed (min_significance
 /// 0) or z_from not measured.
 bool turn_is_supported(double z_from, double z_to, double min_significance);
+/// The print significance a jump of `angle` radians needs, at the new pose and above the old one (one below
+/// chance counting as 0): kClearPrint * (1 + angle / pi), so half a turn needs twice a small one's evidence.
+double print_jump_bar(double angle);
 
 class RefineRun {
  public:
@@ -192,6 +195,9 @@ class RefineRun {
   void align_result_print(Renderer& renderer, RefineResult& res, PrintAtPose& print);
   /// The print alignment then the Newton steps, again (kAlignmentPasses) when the steps went on far.
   void align_print_and_step(Renderer& renderer, RefineResult& res, PrintAtPose& print);
+  /// The shape-equivalent turn of the result (turns_) whose print registers best, if better than the result's,
+  /// converged from; it replaces the result when its print registers clearly better there (kClearPrint).
+  void weigh_shape_turns(Renderer& renderer, RefineResult& res, PrintAtPose& print);
   /// Mask IoU, depth inliers and print registration at the result, per view; returns the rendered pixels.
   int score_views(Renderer& renderer, RefineResult& res);
   /// Curvature, covariance, convergence, verdict and time of the result.

@@ -460,17 +460,20 @@ long planned_evaluations(const RefinerOptions& o) {
   // finish(): the initial loss at the fine scale, a candidate's print registration (two renders), the polish,
   // the print alignment (one axis, and the loss and registration at its turn), the Newton steps (a render for
   // the pixel count, then per round a probe and three tries), both once more when the steps moved far, the
-  // scoring render and the curvature probe.
+  // result's shape-equivalent turns weighed by the print (a registration each, then the same stages from the one
+  // it prefers), the scoring render and the curvature probe.
   const long candidate = scan_at >= 0 && scan_at < o.iterations ? 2 : 0;
   const long print = o.explore_tolerance > 0 ? print_alignment_evaluations(o.print_search) + 2 : 0;
   const long polish = o.polish_iterations > 0 && o.iterations > 0 ? 1 + long(o.polish_runs) * o.polish_iterations : 0;
   const long newton = o.newton_rounds > 0 && o.iterations > 0 ? 1 + long(o.newton_rounds) * (kSecantProbePoses + 3) : 0;
-  const long passes = print > 0 && newton > 0 ? 2 : 1;
+  const long passes = print > 0 && newton > 0 ? kAlignmentPasses : 1;
+  const long converge = polish + passes * (print + newton);
+  const long shape_turns = scan_at >= 0 && o.min_print_significance > 0 ? kMaxShapeTurns + 2 + converge : 0;
   // Without a mask (derive_mask): the renders the object's pixels are derived about (the starts, at most one per
   // run; the better half of the runs; the result), and the result's and the starts' losses under the last ones.
   const long batch = std::max(o.batch_size, 1);
   const long derive = o.derive_mask ? batch + (batch + 1) / 2 + 2 + batch : 0;
-  return total + 2 + candidate + polish + passes * (print + newton) + derive +
+  return total + 2 + candidate + converge + shape_turns + derive +
          (o.probe_distance > 0 ? kCurvatureProbeEvaluations : 0);
 }
 

@@ -158,6 +158,9 @@ Verdict judge(const VerdictEvidence& e, double min_mask_iou, double min_depth_in
   if (e.depth_inliers >= 0)
     weigh(fraction_score(e.depth_inliers, raised(min_depth_inliers)), e.depth_inliers >= raised(min_depth_inliers));
   if (print_weighed) weigh(z > 0 ? z / (z + min_print_significance) : 0.0, z >= min_print_significance);
+  const double rival = e.rival_print_significance;
+  if (print_weighed && std::isfinite(rival) && rival >= min_print_significance)
+    weigh(z > 0 ? z / (z + rival) : 0.0, z > rival);
   v.judged = std::isfinite(weakest);
   v.plausible = v.judged && passes;
   if (v.judged) v.confidence = weakest;

@@ -333,6 +333,8 @@ int main(int argc, char** argv) {
           line["scan_turns"] = r.scan_turns;
           line["scan_taken"] = r.scan_taken;
           line["print_turn_deg"] = r.print_turn * 180.0 / M_PI;
+          line["shape_turn_deg"] = r.shape_turn * 180.0 / M_PI;
+          if (std::isfinite(r.rival_print)) line["rival_print"] = r.rival_print;
           line["retried"] = r.retried;
           line["polish_iterations"] = r.polish_iterations;
           line["newton_steps"] = r.newton_steps;

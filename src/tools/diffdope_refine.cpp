@@ -241,6 +241,8 @@ nlohmann::ordered_json pose_json(const RefineResult& r) {
               {"confidence", r.confidence},
               {"print_significance", std::isfinite(r.print.significance()) ? nlohmann::json(r.print.significance())
                                                                            : nlohmann::json(nullptr)},
+              {"rival_print_significance",
+               std::isfinite(r.rival_print) ? nlohmann::json(r.rival_print) : nlohmann::json(nullptr)},
               {"winner", r.winner},
               {"learning_rate", lr}};
 }
@@ -445,6 +447,9 @@ int run(const Args& a) {
                 r.depth_inliers < 0 ? "n/a" : fmt(r.depth_inliers, "%.3f").c_str(),
                 std::isfinite(z) ? fmt(z, "%.1f sigma").c_str() : "n/a", r.converged ? "yes" : "no",
                 r.plausible ? "yes" : r.judged ? "NO" : "NO (nothing could judge the pose)", r.confidence);
+    if (std::isfinite(r.rival_print))
+      std::printf("print at the best shape-equivalent turn (a rival face) %.1f sigma%s\n", r.rival_print,
+                  r.rival_print >= z ? ": as well as at the pose, whose face is not determined" : "");
     std::printf("time %.0f ms (B=%d, %d iterations, image scale %.2f, winner #%d, lr %.5f)\n", r.time_ms,
                 options.batch_size, r.iterations, options.image_scale, r.winner,
                 r.winner >= 0 ? r.learning_rates[r.winner] : 0.0);

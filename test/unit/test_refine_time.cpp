@@ -36,13 +36,13 @@ TEST(PlannedEvaluations, RunsTimesIterationsLessWhatHalvingDrops) {
   o.probe_distance = 0;
   EXPECT_EQ(planned_evaluations(o), 16 * 25 + 8 * 25 + 4 * 25 + 2 * 25 + 2 + 2 + 1 + 2 * (kSecantProbePoses + 3));
   // With the shape scan, and so the print alignment: when the steps move far, the alignment and the steps run
-  // once more.
+  // once more; and all that again from the shape turn the print prefers at the result.
   o.explore_tolerance = 0.01;
   o.newton_rounds = 0;
   const long without = planned_evaluations(o);
   o.newton_rounds = 2;
   const long newton = 1 + 2 * (kSecantProbePoses + 3), print = print_alignment_evaluations(o.print_search) + 2;
-  EXPECT_EQ(planned_evaluations(o) - without, 2 * newton + print);
+  EXPECT_EQ(planned_evaluations(o) - without, 2 * (2 * newton + print));
   // Without a mask: the renders the pixels are derived about (the starts, at most one per run; the better half;
   // the result), and the result's and the starts' losses under the last pixels.
   const long masked = planned_evaluations(o);

@@ -149,11 +149,14 @@ TEST(Refiner, SuccessiveHalvingDropsTheWorseHalfThreeTimes) {
   EXPECT_EQ(evaluated(Refiner(o).refine(s.cam, s.obs, s.mesh, init)) + 2, planned_evaluations(o));
   // With the shape scan at k = 10 of 20: the 4 runs active then, each with itself and up to kMaxShapeTurns
   // turns, and a candidate run to the end (11 iterations); the candidate's and the basin's print
-  // registrations; the print alignment's, about one axis, and the loss and registration at its turn.
+  // registrations; the print alignment's, about one axis, and the loss and registration at its turn; at the
+  // result, a registration per shape turn, the loss and registration of the one the print prefers, and its
+  // print alignment.
   RefinerOptions scan = o;
   scan.explore_tolerance = 0.01;
-  EXPECT_EQ(planned_evaluations(scan), planned_evaluations(o) + 4 * (1 + kMaxShapeTurns) + 11 + 2 +
-                                           print_alignment_evaluations(scan.print_search) + 2);
+  const long print = print_alignment_evaluations(scan.print_search) + 2;
+  EXPECT_EQ(planned_evaluations(scan),
+            planned_evaluations(o) + 4 * (1 + kMaxShapeTurns) + 11 + 2 + print + kMaxShapeTurns + 2 + print);
   // The polish: one evaluation at the result, then its runs at each further iteration (at most: it stops once
   // converged).
   RefinerOptions polished = o;

@@ -412,3 +412,47 @@ TEST(JumpEvidence, APrintTurnIsRefusedWhereTheRegistrationFallsOrDoesNotRegister
   EXPECT_TRUE(turn_is_supported(std::nan(""), 1.0, bar));  // nothing measured at the result: nothing to lose
   EXPECT_TRUE(turn_is_supported(6.0, 1.0, 0.0));           // the print not weighed
 }
+
+TEST(Refiner, AResultOnABoxsBackFaceIsTurnedToTheFaceThePrintShows) {
+  // A printed box started on its back face: silhouette and depth fit it as well as the truth. Without the scan
+  // (one iteration: it never comes), only the result's shape-equivalent turns weighed by the print find the
+  // front; with the print not weighed (min_print_significance 0) the result stays on the back.
+  const Camera cam(420, 420, 159.5, 119.5, 320, 240);
+  const Mesh box = make_box(Eigen::Vector3d(0.16, 0.06, 0.21), make_label_texture(256, 7));
+  Vector6d d;
+  d << 0, 0, 0, 0.3, 0.5, 0.2;
+  const Pose truth(se3_exp(d).R, Eigen::Vector3d(0.01, -0.01, 0.4));
+  const Observation obs = synthesize_observation(*make_cpu_renderer(), cam, box, truth, SyntheticNoise(), 3);
+  const Eigen::Matrix3d half = Eigen::AngleAxisd(M_PI, Eigen::Vector3d::UnitY()).toRotationMatrix();
+  const Eigen::Vector3d c = box.center().cast<double>();
+  const Pose back = truth * Pose(half, c - half * c);
+  RefinerOptions o;
+  o.iterations = 1;
+  o.image_scale = 1.0;
+  o.retry_turn = 0;
+  const RefineResult turned = Refiner(o).refine(cam, obs, box, back);
+  EXPECT_LT(angle_between(turned.pose.R, truth.R), 2.0);
+  EXPECT_LT((turned.pose.t - truth.t).norm(), 0.003);
+  EXPECT_NEAR(degrees(turned.shape_turn), 180.0, 5.0);
+  EXPECT_TRUE(turned.plausible);
+  // The back face it left is its rival, which the print clearly does not prefer.
+  ASSERT_TRUE(std::isfinite(turned.rival_print));
+  EXPECT_LT(turned.rival_print + kClearPrint, turned.print.significance());
+  o.min_print_significance = 0;
+  const RefineResult kept = Refiner(o).refine(cam, obs, box, back);
+  EXPECT_GT(angle_between(kept.pose.R, truth.R), 170.0);
+  EXPECT_EQ(kept.shape_turn, 0.0);
+  // With RGB alone nothing holds the other degrees of freedom while it converges from a turn: not weighed.
+  o.min_print_significance = RefinerOptions().min_print_significance;
+  Observation rgb_only = obs;
+  rgb_only.depth = cv::Mat();
+  rgb_only.mask = cv::Mat();
+  EXPECT_EQ(Refiner(o).refine(cam, rgb_only, box, back).shape_turn, 0.0);
+  // From the truth, no turn is preferred.
+  o.min_print_significance = RefinerOptions().min_print_significance;
+  const RefineResult right = Refiner(o).refine(cam, obs, box, truth);
+  EXPECT_EQ(right.shape_turn, 0.0);
+  EXPECT_LT(angle_between(right.pose.R, truth.R), 1.0);
+  EXPECT_FALSE(right.rival_print >= right.print.significance());  // NaN (no turn registered better) or below
+  EXPECT_TRUE(right.plausible);
+}

@@ -186,6 +186,33 @@ TEST(Verdict, AWeakPrintLeavesMoreToTheShape) {
   EXPECT_TRUE(judge(e, 0.5, 0.5, 1.0).plausible);
 }
 
+TEST(Verdict, AShapeEquivalentTurnWhosePrintRegistersAsWellContradictsThePose) {
+  // A box on its back face: shape and depth fit as well as on the front, and the back's print lines up clearly.
+  VerdictEvidence e;
+  e.mask_iou = 0.84;
+  e.depth_inliers = 0.95;
+  e.print_significance = 6.2;
+  EXPECT_TRUE(judge(e, 0.5, 0.5, 1.0).plausible);
+  e.rival_print_significance = 8.2;  // converged on the front, the print registers better: contradicted
+  Verdict v = judge(e, 0.5, 0.5, 1.0);
+  EXPECT_FALSE(v.plausible);
+  EXPECT_DOUBLE_EQ(v.confidence, 6.2 / (6.2 + 8.2));
+  e.rival_print_significance = 6.2;  // as well: the print does not prefer this face either
+  EXPECT_FALSE(judge(e, 0.5, 0.5, 1.0).plausible);
+  e.rival_print_significance = 4.0;  // the print prefers the pose, less than clearly: plausible, less confident
+  v = judge(e, 0.5, 0.5, 1.0);
+  EXPECT_TRUE(v.plausible);
+  EXPECT_DOUBLE_EQ(v.confidence, 6.2 / (6.2 + 4.0));
+  EXPECT_LT(v.confidence, judge(VerdictEvidence{0.84, 0.95, 6.2}, 0.5, 0.5, 1.0).confidence);
+  e.rival_print_significance = 8.2;
+  e.print_significance = std::numeric_limits<double>::quiet_NaN();  // no print at the pose: no rival weighed
+  EXPECT_TRUE(judge(e, 0.5, 0.5, 1.0).plausible);
+  e.print_significance = 6.2;
+  EXPECT_TRUE(judge(e, 0.5, 0.5, 0.0).plausible);  // the print not weighed
+  e.rival_print_significance = 0.5;  // a rival below the bar is no evidence against the pose
+  EXPECT_TRUE(judge(e, 0.5, 0.5, 1.0).plausible);
+}
+
 TEST(Verdict, AShapeWhoseDepthDisagreesOnAFifthOfItIsContradicted) {
   // A plain can tilted in the plane of view: its outline barely changes, but its ends lie a centimetre and more
   // off the observed depth. Half the evidence agreeing is not enough by default; a fifth disagreeing contradicts.

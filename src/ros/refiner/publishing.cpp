@@ -24,6 +24,7 @@ diffdope_ros::RefinedPose refined_pose_msg(const diffdope::RefineResult& r, cons
   p.initial_loss = r.initial_loss;
   p.converged = r.converged;
   p.print_significance = r.print.significance();
+  p.rival_print_significance = r.rival_print;
   p.plausible = r.plausible;
   p.confidence = r.confidence;
   p.judged = r.judged;
