@@ -51,7 +51,8 @@ inline bool operator!=(const RenderOptions& a, const RenderOptions& b) { return 
 ///           (only when the observation carries an edge map, see Observation::edges)
 /// where S is the observed mask (all ones when absent) and cov the antialiased coverage of the render.
 /// Ranges (checked by validate()): weights [0, kMaxWeight], not all 0; edge_scale [0.001, 100]; rgb_miss [0, 10];
-/// depth_truncation [0.0001, 10] m; occlusion_margin [0, 10] m.
+/// depth_truncation [0.0001, 10] m; occlusion_margin [0, 10] m. With depth_noise_power p > 0, tau and the depth
+/// error of a reading at z are scaled by (z / z_ref)^p (z_ref: the median observed depth over the term's pixels).
 struct LossOptions {
   double weight_rgb = 1.0;
   double weight_depth = 1.0;
@@ -69,11 +70,19 @@ struct LossOptions {
   /// Metres: where the observed depth is this much nearer than the render, an occluder hides the object, so
   /// an empty observed mask there is not evidence against the render (mask term skips the pixel). 0 = off.
   double occlusion_margin = 0.02;
+  /// How a depth camera's noise grows with the distance z: as z^depth_noise_power. Each reading's error and
+  /// truncation are taken relative to (z / z_ref)^power, z_ref the median observed depth over the term's pixels,
+  /// so a reading counts as much as its noise allows (an L1 maximum likelihood). 0: every reading alike (noiseless
+  /// or time-of-flight depth over a shallow object); 2: a stereo or structured-light camera (RealSense, Kinect v1),
+  /// whose noise grows with z^2. {0, 1, 2}.
+  int depth_noise_power = 0;
 
   static constexpr double kMaxWeight = 1000;
   /// Throws std::invalid_argument naming the first field that is not finite or outside its range.
   void validate() const;
 };
+bool operator==(const LossOptions& a, const LossOptions& b);
+inline bool operator!=(const LossOptions& a, const LossOptions& b) { return !(a == b); }
 
 /// One hypothesis' loss: per-term means (unweighted), the weighted total, and d(total)/d(delta).
 struct LossValue {

@@ -32,6 +32,9 @@ RefinerOptions CalibrationOptions::default_refiner() {
   o.derive_mask = false;  // the calibrator derives the robot's pixels itself (derive_mask()), per capture
   o.lr_low = 0.0002;
   o.lr_high = 0.006;
+  // The arm spans a metre or more of depth, where a stereo camera's noise grows several times (z^2): each reading
+  // weighs as its noise allows (docs/calibration.md).
+  o.loss.depth_noise_power = 2;
   return o;
 }
 

@@ -2,6 +2,9 @@
 // Loss normalisers and per-call constants shared by the CPU and CUDA backends (internal header): each term is a
 // mean over the pixels it is defined on (whole image, not the region of interest, so the value does not depend
 // on the region).
+#include <algorithm>
+#include <vector>
+
 #include <opencv2/core.hpp>
 
 #include "render/kernels/pixel_loss.hpp"
@@ -17,6 +20,20 @@ struct LossSetup {
   double n_rgb = 0, n_depth = 0;
   bool has_rgb = false, has_mask = false;
 };
+
+/// The median depth reading over the observed mask (all readings without one); 0 without any.
+inline float median_observed_depth(const Observation& obs) {
+  std::vector<float> z;
+  for (int y = 0; y < obs.depth.rows; ++y) {
+    const float* d = obs.depth.ptr<float>(y);
+    const float* m = obs.has_mask() ? obs.mask.ptr<float>(y) : nullptr;
+    for (int x = 0; x < obs.depth.cols; ++x)
+      if (d[x] > 0.f && (!m || m[x] > 0.f)) z.push_back(d[x]);
+  }
+  if (z.empty()) return 0.f;
+  std::nth_element(z.begin(), z.begin() + long(z.size() / 2), z.end());
+  return z[z.size() / 2];
+}
 
 inline LossSetup make_loss_setup(const Camera& camera, const Observation& obs, const LossOptions& loss) {
   LossSetup s;
@@ -40,6 +57,12 @@ inline LossSetup make_loss_setup(const Camera& camera, const Observation& obs, c
   P.k_mask = (obs.has_mask() && s.n_rgb > 0) ? static_cast<float>(loss.weight_mask / s.n_rgb) : 0.f;
   P.rgb_miss = static_cast<float>(loss.rgb_miss);
   P.depth_trunc = static_cast<float>(loss.depth_truncation);
+  P.depth_noise_power = 0;
+  P.depth_noise_scale = 0.f;
+  if (loss.depth_noise_power > 0 && obs.has_depth()) {
+    const float z_ref = median_observed_depth(obs);
+    if (z_ref > 0.f) P.depth_noise_power = loss.depth_noise_power, P.depth_noise_scale = 1.f / z_ref;
+  }
   P.occlusion_margin = static_cast<float>(loss.occlusion_margin);
   s.k_edges = (obs.has_edges() && s.n_rgb > 0) ? static_cast<float>(loss.weight_edges / s.n_rgb) : 0.f;
   s.edge_scale = static_cast<float>(loss.edge_scale);

@@ -384,7 +384,7 @@ class PipelineRenderer final : public Renderer {
       if (changed) ++mask_generation_[k];
     }
     SetupCache& c = setups_[k];
-    const bool same = c.valid && std::memcmp(&c.loss, &loss, sizeof loss) == 0 && c.width == camera.width &&
+    const bool same = c.valid && c.loss == loss && c.width == camera.width &&
                       c.height == camera.height && c.has_rgb == o.has_rgb() && c.has_depth == o.has_depth() &&
                       c.has_mask == o.has_mask() && c.has_edges == o.has_edges() &&
                       c.has_texture == o.has_texture() &&

@@ -41,6 +41,8 @@ const std::vector<OptionSpec<LossOptions>>& loss_option_table() {
       option_row("weight_texture", &L::weight_texture, 0, L::kMaxWeight, "",
                  "Sobel of the log grey level, a lighting-robust print term (off: docs/benchmarks.md)"),
       option_row("texture_epsilon", &L::texture_epsilon, 1e-3, 1, "", "grey offset inside the texture term's log"),
+      option_row("depth_noise_power", &L::depth_noise_power, 0, 2, " (0: every reading alike; 2: stereo, RealSense)",
+                 "the depth noise grows as z^power: each reading weighs as its noise allows"),
   };
   return rows;
 }
@@ -51,6 +53,14 @@ bool operator==(const RenderOptions& a, const RenderOptions& b) {
   return a.cull_back_faces == b.cull_back_faces && a.auto_cull_closed == b.auto_cull_closed &&
          a.near_plane == b.near_plane && a.roi_margin == b.roi_margin && a.use_roi == b.use_roi &&
          a.lod_pixel_error == b.lod_pixel_error && a.threads == b.threads;
+}
+
+bool operator==(const LossOptions& a, const LossOptions& b) {
+  return a.weight_rgb == b.weight_rgb && a.weight_depth == b.weight_depth && a.weight_mask == b.weight_mask &&
+         a.weight_edges == b.weight_edges && a.edge_scale == b.edge_scale && a.weight_texture == b.weight_texture &&
+         a.texture_epsilon == b.texture_epsilon && a.rgb_miss == b.rgb_miss &&
+         a.depth_truncation == b.depth_truncation && a.occlusion_margin == b.occlusion_margin &&
+         a.depth_noise_power == b.depth_noise_power;
 }
 
 void LossOptions::validate() const {

@@ -63,6 +63,7 @@ std::vector<NumericField> numeric_fields() {
       {"loss.rgb_miss", [](RefinerOptions& o, double v) { o.loss.rgb_miss = v; }, -1},
       {"loss.depth_truncation", [](RefinerOptions& o, double v) { o.loss.depth_truncation = v; }, 0},
       {"loss.occlusion_margin", [](RefinerOptions& o, double v) { o.loss.occlusion_margin = v; }, -0.1},
+      {"loss.depth_noise_power", [](RefinerOptions& o, double v) { o.loss.depth_noise_power = int(v); }, 3},
       {"render.near_plane", [](RefinerOptions& o, double v) { o.render.near_plane = v; }, 0},
       {"render.roi_margin", [](RefinerOptions& o, double v) { o.render.roi_margin = int(v); }, 1e6},
       {"render.lod_pixel_error", [](RefinerOptions& o, double v) { o.render.lod_pixel_error = v; }, 1e3},
@@ -79,7 +80,7 @@ TEST(InputLimits, EveryNumericOptionMustBeFiniteAndInRange) {
     // (integer fields cannot hold NaN or infinity; the YAML reader refuses them, tested below)
     if (std::string(f.name) != "batch_size" && std::string(f.name) != "iterations" &&
         std::string(f.name) != "early_stop_patience" && std::string(f.name) != "render.roi_margin" &&
-        std::string(f.name) != "render.threads")
+        std::string(f.name) != "render.threads" && std::string(f.name) != "loss.depth_noise_power")
       bad.insert(bad.end(), {kNaN, kInf, -kInf});
     for (double v : bad) {
       RefinerOptions o;

@@ -55,7 +55,9 @@ TEST(SimdRows, ARowGivesThePixelKernelsBitsForEveryValueGradientAndSum) {
   std::mt19937 rng(7);
   std::vector<PixelLossParams> params = {{0.3f, 0.2f, 0.1f, 0.5f, 0.05f, 0.02f},   // every term, occlusion on
                                          {0.3f, 0.f, 0.1f, 0.5f, 0.05f, 0.f},      // no depth term, no occlusion
-                                         {0.f, 0.2f, 0.f, 0.25f, 0.03f, 0.02f}};   // depth alone
+                                         {0.f, 0.2f, 0.f, 0.25f, 0.03f, 0.02f},    // depth alone
+                                         {0.3f, 0.2f, 0.1f, 0.5f, 0.05f, 0.02f, 1.f / 0.45f, 2},  // noise ~ z^2
+                                         {0.f, 0.2f, 0.f, 0.25f, 0.03f, 0.f, 1.f / 0.55f, 1}};    // noise ~ z
   int rows = 0;
   for (const PixelLossParams& P : params)
     for (int n : {0, 1, 3, 4, 7, 8, 9, 15, 16, 17, 31, 32, 33, 64, 101})
@@ -91,7 +93,7 @@ TEST(SimdRows, ARowGivesThePixelKernelsBitsForEveryValueGradientAndSum) {
             ASSERT_TRUE(same_bits(sum[k], want[k])) << "term " << k << ", n " << n << ": " << sum[k] << " vs " << want[k];
           ++rows;
         }
-  EXPECT_EQ(rows, 3 * 15 * 8 * 2);
+  EXPECT_EQ(rows, int(params.size()) * 15 * 8 * 2);
   std::printf("loss_row runs on %s\n", simd_row_target());
 }
 
@@ -131,6 +133,28 @@ struct ShadeScene {
     G = ProjectedView{cam.data(), nullptr, area.data(), level.data()};
   }
 };
+
+TEST(PixelLoss, ADepthReadingWeighsAsItsNoiseGrows) {
+  // A fully covered, observed pixel whose reading is 1 cm behind the render: with tau = 5 cm fixed it costs 0.2
+  // wherever it is; with the noise growing as z^p about z_ref = 1 m, tau is 5 cm * z^p at the reading's depth z,
+  // so a reading at 2 m costs about a quarter of that (p = 2) and one at 0.2 m saturates at 1.
+  const float I[3] = {0.f, 0.f, 0.f}, C[3] = {0.f, 0.f, 0.f};
+  PixelLossParams P{0.f, 1.f, 0.f, 0.5f, 0.05f, 0.f};
+  const auto depth_term = [&](float z) { return pixel_loss_step(P, 1.f, I, z + 0.01f, 1.f, C, z, nullptr).depth; };
+  EXPECT_NEAR(depth_term(1.f), 0.2f, 1e-5f);
+  EXPECT_NEAR(depth_term(2.f), 0.2f, 1e-5f);
+  P.depth_noise_scale = 1.f, P.depth_noise_power = 2;
+  EXPECT_NEAR(depth_term(1.f), 0.01f / (0.05f * 1.01f * 1.01f), 1e-5f);
+  EXPECT_NEAR(depth_term(2.f), 0.01f / (0.05f * 2.01f * 2.01f), 1e-5f);
+  EXPECT_FLOAT_EQ(depth_term(0.2f), 1.f);  // beyond its tau (2.2 mm): saturated
+  P.depth_noise_scale = 0.5f;  // z_ref = 2 m: the reading at 2 m has the fixed tau again
+  EXPECT_NEAR(depth_term(2.f), 0.01f / (0.05f * 1.005f * 1.005f), 1e-5f);
+  P.depth_noise_scale = 1.f, P.depth_noise_power = 1;
+  EXPECT_NEAR(depth_term(2.f), 0.01f / (0.05f * 2.01f), 1e-5f);
+  // Without a reading there is no depth term, whatever the power (a missing reading is no evidence).
+  P.depth_noise_power = 2;
+  EXPECT_FLOAT_EQ(pixel_loss_step(P, 1.f, I, 0.f, 1.f, C, 1.f, nullptr).depth, 0.f);
+}
 
 TEST(SimdRows, AShadeRowGivesThePixelKernelsBitsForTriangleAttributesAndBarycentrics) {
   std::mt19937 rng(11);

@@ -5,6 +5,7 @@
 //
 //  rgb   = S * ( sum_ch |cov*I_ch - C_ch| / 3 + (1 - cov) * rgb_miss )
 //  depth = S * valid * ( min(|cov*I_d - D|, cov*tau) + (1 - cov) * tau ) / tau      (in [0, 1] per pixel)
+//          tau = depth_trunc * (I_d / z_ref)^power: the noise's growth with distance
 //  mask  = |S - cov|, except where S = 0 because something is in front of the object: an observed depth more
 //          than occlusion_margin nearer than the render means an occluder, and the visible mask is rightly
 //          empty there (without this, occluders push the object away).
@@ -21,6 +22,8 @@ struct PixelLossParams {
   float rgb_miss;                // cost of an observed pixel the render misses, colour term
   float depth_trunc;             // tau, metres: depth errors saturate here
   float occlusion_margin;        // metres; <= 0 disables occlusion handling in the mask term
+  float depth_noise_scale;       // 1 / z_ref: tau and the error are taken relative to (I_d / z_ref)^power
+  int depth_noise_power;         // 0 (tau fixed), 1 or 2 (LossOptions::depth_noise_power)
 };
 
 struct PixelLossValue {
