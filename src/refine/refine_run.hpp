@@ -196,7 +196,9 @@ class RefineRun {
   /// The print alignment then the Newton steps, again (kAlignmentPasses) when the steps went on far.
   void align_print_and_step(Renderer& renderer, RefineResult& res, PrintAtPose& print);
   /// The shape-equivalent turn of the result (turns_) whose print registers best, if better than the result's,
-  /// converged from; it replaces the result when its print registers clearly better there (kClearPrint).
+  /// converged from; it replaces the result when its print registers clearly better there (kClearPrint), and
+  /// is otherwise the result's rival (RefineResult::rival_print) when it stayed a pose of its own at a loss no
+  /// higher. Only with a mask or depth.
   void weigh_shape_turns(Renderer& renderer, RefineResult& res, PrintAtPose& print);
   /// Mask IoU, depth inliers and print registration at the result, per view; returns the rendered pixels.
   int score_views(Renderer& renderer, RefineResult& res);
