@@ -5,11 +5,11 @@
 #include <algorithm>
 
 #include "diffdope_ros/conversions.hpp"
-#include "ros/refiner/refiner_nodelet.hpp"
+#include "ros/refiner/worker.hpp"
 
 namespace diffdope_ros {
 
-diffdope::Pose RefinerNodelet::meshPoseInCamera(const geometry_msgs::PoseStamped& pose, const Slot& slot,
+diffdope::Pose Worker::meshPoseInCamera(const geometry_msgs::PoseStamped& pose, const Slot& slot,
                                                 const Frame& frame) {
   const std::string what = "initial pose of '" + slot.config.name + "'";
   diffdope::Pose in_source = pose_from_msg(pose.pose, what);
@@ -26,15 +26,15 @@ diffdope::Pose RefinerNodelet::meshPoseInCamera(const geometry_msgs::PoseStamped
       // Waits ~tf_timeout in wall time: tf2's own timeout sleeps in ROS time, which stands still while a bag
       // is paused or over (sim time), and the worker would hang there.
       const auto available = [&] {
-        return !time_travel ? outputs_.tf_buffer->canTransform(camera, source, frame.header.stamp)
-                            : outputs_.tf_buffer->canTransform(camera, frame.header.stamp, source, pose.header.stamp, fixed_frame);
+        return !time_travel ? publishers_.tf_buffer->canTransform(camera, source, frame.header.stamp)
+                            : publishers_.tf_buffer->canTransform(camera, frame.header.stamp, source, pose.header.stamp, fixed_frame);
       };
       const ros::WallTime deadline = ros::WallTime::now() + ros::WallDuration(settings_.tf_timeout);
       while (!available() && ros::WallTime::now() < deadline && ros::ok()) ros::WallDuration(0.005).sleep();
       if (!time_travel)  // (throws, saying why, when it is still not there)
-        t = outputs_.tf_buffer->lookupTransform(camera, source, frame.header.stamp);
+        t = publishers_.tf_buffer->lookupTransform(camera, source, frame.header.stamp);
       else  // the detection's frame at its own stamp, through a fixed frame to the camera at the image stamp
-        t = outputs_.tf_buffer->lookupTransform(camera, frame.header.stamp, source, pose.header.stamp, fixed_frame);
+        t = publishers_.tf_buffer->lookupTransform(camera, frame.header.stamp, source, pose.header.stamp, fixed_frame);
     } catch (const tf2::TransformException& e) {
       throw std::runtime_error(what + ": no transform from '" + source + "' to '" + camera + "' at t=" +
                                format_fixed(frame.header.stamp.toSec()) + ": " + e.what());
@@ -42,18 +42,18 @@ diffdope::Pose RefinerNodelet::meshPoseInCamera(const geometry_msgs::PoseStamped
     camera_from_source = pose_from_transform(t.transform, what + " (TF)");
   }
   const diffdope::Pose mesh_pose = camera_from_source * in_source * slot.config.model_transform;
-  if (!(mesh_pose.t.z() > work_.refiner_options.render.near_plane))
+  if (!(mesh_pose.t.z() > options_.refiner.render.near_plane))
     throw std::runtime_error(what + ": the object is behind the camera (z = " + format_fixed(mesh_pose.t.z()) +
                              " m in '" + camera + "')");
   return mesh_pose;
 }
 
-void RefinerNodelet::resetOnTimeJump(const Frame& frame) {
+void Worker::resetOnTimeJump(const Frame& frame) {
   const double stamp = frame.header.stamp.toSec();
-  const double back = work_.last_frame_stamp - stamp;
-  work_.last_frame_stamp = std::max(work_.last_frame_stamp, stamp);
+  const double back = last_frame_stamp_ - stamp;
+  last_frame_stamp_ = std::max(last_frame_stamp_, stamp);
   if (!(back > 1.0)) return;  // frames arrive in order; a small step back is the synchronizer's approximation
-  work_.last_frame_stamp = stamp;
+  last_frame_stamp_ = stamp;
   for (auto& slot : slots_) {
     if (slot->tracks) slot->tracks->reset();
     slot->tracking = 0;
@@ -62,8 +62,8 @@ void RefinerNodelet::resetOnTimeJump(const Frame& frame) {
                            "; a looped bag or a restarted clock?): tracks and unused detections reset");
 }
 
-void RefinerNodelet::absorbDetections(const Frame& frame) {
-  for (auto& [i, msgs] : inputs_.inbox->take()) {
+void Worker::absorbDetections(const Frame& frame) {
+  for (auto& [i, msgs] : inbox_.take()) {
     Slot& s = *slots_[i];
     if (!s.tracks) continue;
     std::vector<diffdope::Pose> poses;
@@ -97,14 +97,14 @@ void RefinerNodelet::absorbDetections(const Frame& frame) {
       if (auto stale = track.take_stale_detection(image_stamp))
         errors_.error("pose/" + slot->config.name,
                       "initial pose of '" + name + "' ignored: stamped " + format_fixed(stale->stamp) +
-                          ", more than ~max_detection_age (" + format_fixed(work_.track_options.max_detection_age, 1) +
+                          ", more than ~max_detection_age (" + format_fixed(options_.track.max_detection_age, 1) +
                           " s) before the image at " + format_fixed(image_stamp));
       else if (auto ahead = track.detection_ahead(image_stamp))
         errors_.error("pose/" + slot->config.name,
                       "initial pose of '" + name + "' not used yet: stamped " + format_fixed(*ahead) + ", " +
                           format_fixed(*ahead - image_stamp, 1) + " s after the image at " +
                           format_fixed(image_stamp) + " (more than ~max_detection_age, " +
-                          format_fixed(work_.track_options.max_detection_age, 1) +
+                          format_fixed(options_.track.max_detection_age, 1) +
                           " s); kept for a later image (is the detector on another clock?)");
     }
 }

@@ -58,7 +58,7 @@ void RefinerNodelet::onDiagnostics(diagnostic_updater::DiagnosticStatusWrapper& 
   stat.add("~refine calls failed or refused", s.requests_failed);
   stat.add("estimated cost (ms per object and evaluation)",
            s.cost_measured ? format_fixed(s.ms_per_evaluation, 3) + " (measured)"
-                           : format_fixed(1e3 * work_.refine_time.kPriorSecondsPerEvaluation, 3) + " (prior, nothing timed yet)");
+                           : format_fixed(1e3 * diffdope::RefineTimeEstimator::kPriorSecondsPerEvaluation, 3) + " (prior, nothing timed yet)");
   stat.add("last error", e.last_error);
   for (const auto& kv : e.error_counts) stat.add("errors: " + kv.first, kv.second);
   for (const auto& kv : e.warn_counts) stat.add("warnings: " + kv.first, kv.second);

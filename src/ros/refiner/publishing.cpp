@@ -1,4 +1,4 @@
-// RefinerNodelet's outputs for one refinement: the tracks' outcome, per-instance poses (with covariance), TF, the
+// The Worker's outputs for one refinement: the tracks' outcome, per-instance poses (with covariance), TF, the
 // RefinedPoseArray with every score, statistics, and the visual outputs while someone subscribes.
 #include <geometry_msgs/PoseWithCovarianceStamped.h>
 
@@ -6,7 +6,7 @@
 
 #include "diffdope/pose_curvature.hpp"
 #include "diffdope_ros/conversions.hpp"
-#include "ros/refiner/refiner_nodelet.hpp"
+#include "ros/refiner/worker.hpp"
 
 namespace diffdope_ros {
 namespace {
@@ -43,7 +43,7 @@ diffdope_ros::RefinedPose refined_pose_msg(const diffdope::RefineResult& r, cons
 
 }  // namespace
 
-std::vector<diffdope_ros::RefinedPose> RefinerNodelet::publishResults(
+std::vector<diffdope_ros::RefinedPose> Worker::publishResults(
     const Frame& frame, const SeedList& seeds, const TargetList& target_of, const std::vector<size_t>& seeds_of,
     const std::vector<diffdope::RefineResult>& results, std::vector<std::string>* skipped, ros::WallTime start) {
   std::vector<diffdope_ros::RefinedPose> out;
@@ -80,7 +80,7 @@ std::vector<diffdope_ros::RefinedPose> RefinerNodelet::publishResults(
     implausible += verdict == diffdope::VerdictState::kImplausible;
     diffdope_ros::RefinedPose p = message(seed, refined);
     out.push_back(p);
-    if (!r.plausible && !work_.publish_implausible) continue;  // scores still go out in ~refined_poses
+    if (!r.plausible && !options_.publish_implausible) continue;  // scores still go out in ~refined_poses
     in.pose_pub.publish(p.pose);
     if (r.curvature.valid) {  // the pose with the covariance the loss's curvature gives (pose_curvature.hpp)
       geometry_msgs::PoseWithCovarianceStamped c;
@@ -99,14 +99,14 @@ std::vector<diffdope_ros::RefinedPose> RefinerNodelet::publishResults(
     t.transform = transform_to_msg(refined * inv_model);
     transforms.push_back(t);
   }
-  if (settings_.publish_tf && !transforms.empty()) outputs_.tf_broadcaster->sendTransform(transforms);
+  if (settings_.publish_tf && !transforms.empty()) publishers_.tf_broadcaster->sendTransform(transforms);
   const double latency = (ros::Time::now() - frame.header.stamp).toSec();
   diffdope_ros::RefinedPoseArray array;
   array.header = frame.header;
   array.poses = out;
   array.latency = latency;
   array.processing_time = (ros::WallTime::now() - frame.received).toSec();
-  outputs_.refined.publish(array);
+  publishers_.refined.publish(array);
   {
     std::lock_guard<std::mutex> lock(handover_.mutex);
     const ros::WallTime now = ros::WallTime::now();
@@ -119,21 +119,21 @@ std::vector<diffdope_ros::RefinedPose> RefinerNodelet::publishResults(
     handover_.stats.last_latency = latency;
     handover_.stats.latency_sum += latency;
     handover_.stats.last_refine_ms = (now - start).toSec() * 1e3;
-    handover_.stats.ms_per_evaluation = 1e3 * work_.refine_time.seconds_per_evaluation();
-    handover_.stats.cost_measured = work_.refine_time.observations() > 0;
+    handover_.stats.ms_per_evaluation = 1e3 * refine_time_.seconds_per_evaluation();
+    handover_.stats.cost_measured = refine_time_.observations() > 0;
   }
   try {  // visualisation must never cost the refinement its result
-    if (outputs_.overlay.getNumSubscribers() > 0) publishOverlay(frame, target_of, results);
-    if (outputs_.markers.getNumSubscribers() > 0) publishMarkers(frame, target_of, results);
+    if (publishers_.overlay.getNumSubscribers() > 0) publishOverlay(frame, target_of, results);
+    if (publishers_.markers.getNumSubscribers() > 0) publishMarkers(frame, target_of, results);
   } catch (const std::exception& e) {
     errors_.error("visualisation", std::string("overlay/markers not published: ") + e.what());
   }
   return out;
 }
 
-void RefinerNodelet::reportLostTrack(const Slot& s, int instance) {
+void Worker::reportLostTrack(const Slot& s, int instance) {
   const std::string& name = s.instances[size_t(instance)].name;
-  errors_.warn("lost_" + name, "lost track of '" + name + "' (" + std::to_string(work_.track_options.max_failures) +
+  errors_.warn("lost_" + name, "lost track of '" + name + "' (" + std::to_string(options_.track.max_failures) +
                                    " implausible refinements in a row); waiting for a detection");
 }
 

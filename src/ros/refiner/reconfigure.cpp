@@ -6,8 +6,8 @@
 
 namespace diffdope_ros {
 
-void RefinerNodelet::setupReconfigure() {
-  reconfigure_.settings = {mode_, work_.refiner_options, work_.track_options, work_.publish_implausible};
+void RefinerNodelet::setupReconfigure(const WorkerOptions& launch) {
+  reconfigure_.settings = {mode_, launch.refiner, launch.track, launch.publish_implausible};
   reconfigure_.applied_config = to_config(reconfigure_.settings);
   // The server starts from the node's own values (YAML, then ~parameters), not from the .cfg defaults. Its
   // constructor advertises set_parameters before updateConfig below: holding the server's mutex makes a call that

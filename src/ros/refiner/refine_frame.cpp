@@ -2,11 +2,11 @@
 // the node's refiner for all of them, then publishing (publishing.cpp).
 #include "diffdope/instance_masks.hpp"
 #include "diffdope_ros/conversions.hpp"
-#include "ros/refiner/refiner_nodelet.hpp"
+#include "ros/refiner/worker.hpp"
 
 namespace diffdope_ros {
 
-std::vector<diffdope_ros::RefinedPose> RefinerNodelet::refineAndPublish(const Frame& frame, const SeedList& seeds,
+std::vector<diffdope_ros::RefinedPose> Worker::refineAndPublish(const Frame& frame, const SeedList& seeds,
                                                                         const diffdope::RefinerOptions& options,
                                                                         std::vector<std::string>* skipped) {
   const ros::WallTime start = ros::WallTime::now();
@@ -61,7 +61,7 @@ std::vector<diffdope_ros::RefinedPose> RefinerNodelet::refineAndPublish(const Fr
   // Per-call options (tracking budget, service overrides) run on the node's refiner (its meshes stay cached).
   const ros::WallTime refine_start = ros::WallTime::now();
   std::vector<diffdope::RefineResult> results =
-      work_.refiner->refine_all(frame.camera, frame.observation, targets, options);
+      refiner_->refine_all(frame.camera, frame.observation, targets, options);
   // An undetermined result (with no iteration run, each is its start, unrefined) is never called plausible,
   // whatever the start's scores: it is neither tracked nor put on TF as a refined pose.
   for (diffdope::RefineResult& r : results)
@@ -70,7 +70,7 @@ std::vector<diffdope_ros::RefinedPose> RefinerNodelet::refineAndPublish(const Fr
   // bound, so they err long.
   double evaluations = 0;
   for (const diffdope::RefineResult& r : results) evaluations += double(r.evaluations);
-  work_.refine_time.observe(evaluations, (ros::WallTime::now() - refine_start).toSec());
+  refine_time_.observe(evaluations, (ros::WallTime::now() - refine_start).toSec());
   return publishResults(frame, seeds, target_of, seeds_of, results, skipped, start);
 }
 

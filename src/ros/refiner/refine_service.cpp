@@ -1,5 +1,5 @@
-// ~refine: a call waits in the worker's queue and is answered by it (refine_targets.hpp checks it and picks its
-// targets; this file adds the frame, TF and the time budget).
+// ~refine: the nodelet's callback queues a call for the worker and waits; Worker::processRequest answers it
+// (refine_targets.hpp checks the call and picks its targets; this file adds the frame, TF and the time budget).
 #include "diffdope_ros/conversions.hpp"
 #include "ros/refiner/refiner_nodelet.hpp"
 
@@ -23,7 +23,7 @@ bool RefinerNodelet::onRefineService(diffdope_ros::Refine::Request& req, diffdop
   return true;  // failures are reported in res.success / res.message, not as a failed call
 }
 
-diffdope_ros::Refine::Response RefinerNodelet::processRequest(const diffdope_ros::Refine::Request& req,
+diffdope_ros::Refine::Response Worker::processRequest(const diffdope_ros::Refine::Request& req,
                                                               const std::shared_ptr<const Frame>& frame) {
   diffdope_ros::Refine::Response res;
   auto fail = [&](const std::string& why) {
@@ -38,7 +38,7 @@ diffdope_ros::Refine::Response RefinerNodelet::processRequest(const diffdope_ros
   for (const auto& p : req.initial_poses) names.pose_names.push_back(p.name);
   names.iterations = req.iterations;
   names.batch_size = req.batch_size;
-  const CheckedRequest checked = check_refine_request(objects, names, work_.refiner_options);
+  const CheckedRequest checked = check_refine_request(objects, names, options_.refiner);
   if (!checked.error.empty()) return fail(checked.error);
   if (!frame) return fail("no synchronized frame received yet (check the input topics)");
 
@@ -59,7 +59,7 @@ diffdope_ros::Refine::Response RefinerNodelet::processRequest(const diffdope_ros
   // The time budget, before any detection is used up.
   const int count = int(targets.seeds.size() + targets.known.size());
   if (const std::string why =
-          diffdope::check_request_time(checked.options, count, work_.refine_time, settings_.max_request_time);
+          diffdope::check_request_time(checked.options, count, refine_time_, settings_.max_request_time);
       !why.empty())
     return fail(why);
   take_known_starts(objects, targets.known, stamp, targets.seeds);

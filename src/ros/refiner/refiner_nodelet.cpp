@@ -18,30 +18,36 @@ void RefinerNodelet::onInit() {
   settings_ = load_refiner_settings(pnh, getName(), errors_);
   if (settings_.error.empty()) errors_.set_throttle_period(settings_.error_throttle);
   mode_ = settings_.mode;
-  work_.track_options = settings_.track;
-  work_.publish_implausible = settings_.publish_implausible;
+  WorkerOptions options;
+  options.track = settings_.track;
+  options.publish_implausible = settings_.publish_implausible;
 
-  outputs_.tf_buffer = std::make_unique<tf2_ros::Buffer>(ros::Duration(30.0));
-  outputs_.tf_listener = std::make_unique<tf2_ros::TransformListener>(*outputs_.tf_buffer, nh);
-  outputs_.tf_broadcaster = std::make_unique<tf2_ros::TransformBroadcaster>();
-  outputs_.refined = pnh.advertise<diffdope_ros::RefinedPoseArray>("refined_poses", 10);
-  outputs_.markers = pnh.advertise<visualization_msgs::MarkerArray>("markers", 1);
+  publishers_.tf_buffer = std::make_unique<tf2_ros::Buffer>(ros::Duration(30.0));
+  publishers_.tf_listener = std::make_unique<tf2_ros::TransformListener>(*publishers_.tf_buffer, nh);
+  publishers_.tf_broadcaster = std::make_unique<tf2_ros::TransformBroadcaster>();
+  publishers_.refined = pnh.advertise<diffdope_ros::RefinedPoseArray>("refined_poses", 10);
+  publishers_.markers = pnh.advertise<visualization_msgs::MarkerArray>("markers", 1);
   inputs_.it = std::make_unique<image_transport::ImageTransport>(nh);
   image_transport::ImageTransport pit(pnh);
-  outputs_.overlay = pit.advertise("overlay", 1);
+  publishers_.overlay = pit.advertise("overlay", 1);
 
-  loadObjects();
+  std::unique_ptr<diffdope::Refiner> refiner = loadObjects(options);
+  // (Read now for ~ready and the log below: the worker takes the refiner.)
+  const bool can_refine = refiner != nullptr;
+  const std::string backend = refiner ? refiner->backend() : std::string("none");
   std::vector<DetectionInbox::Object> inbox_objects;
   for (const auto& slot : slots_)
     inbox_objects.push_back({slot->config.name, slot->config.max_instances, slot->config.pose_topic});
   inputs_.inbox = std::make_unique<DetectionInbox>(std::move(inbox_objects), settings_, errors_);
 
-  outputs_.diagnostics = std::make_unique<diagnostic_updater::Updater>(nh, pnh, getName());
-  outputs_.diagnostics->setHardwareID("diffdope_refiner");
-  outputs_.diagnostics->add("refiner", this, &RefinerNodelet::onDiagnostics);
+  publishers_.diagnostics = std::make_unique<diagnostic_updater::Updater>(nh, pnh, getName());
+  publishers_.diagnostics->setHardwareID("diffdope_refiner");
+  publishers_.diagnostics->add("refiner", this, &RefinerNodelet::onDiagnostics);
 
-  setupReconfigure();
-  worker_ = std::thread([this] { workerLoop(); });
+  setupReconfigure(options);
+  worker_ = std::make_unique<Worker>(options, std::move(refiner), settings_, errors_, slots_, *inputs_.inbox,
+                                     publishers_, handover_);
+  worker_->start();
   inputs_.inbox->subscribe(nh, pnh);
   inputs_.sync.start(nh, pnh, *inputs_.it, [this](std::shared_ptr<Frame> frame) { onFrame(std::move(frame)); });
   // The service runs on its own queue and thread: a call waits for the worker without holding up the inputs or
@@ -54,25 +60,26 @@ void RefinerNodelet::onInit() {
   inputs_.watchdog = pnh.createWallTimer(ros::WallDuration(1.0), &RefinerNodelet::onWatchdog, this);
   // Latched: a launch or a bag player can wait for the meshes to be loaded and the inputs subscribed; false when
   // the configuration leaves nothing to refine (the error is logged and in diagnostics).
-  outputs_.ready = pnh.advertise<std_msgs::Bool>("ready", 1, true);
+  publishers_.ready = pnh.advertise<std_msgs::Bool>("ready", 1, true);
   std_msgs::Bool ready;
-  ready.data = work_.refiner != nullptr;
-  outputs_.ready.publish(ready);
-  const diffdope::RefinerOptions& o = work_.refiner_options;
-  const diffdope::TrackOptions& t = work_.track_options;
+  ready.data = can_refine;
+  publishers_.ready.publish(ready);
+  const diffdope::RefinerOptions& o = options.refiner;
+  const diffdope::TrackOptions& t = options.track;
   NODELET_INFO_STREAM("diffdope refiner ready: mode "
                       << to_string(mode_) << ", inputs rgb" << (settings_.use_depth ? "+depth" : "")
                       << (settings_.use_mask ? "+mask" : "") << ", " << slots_.size() << " object(s), "
                       << o.batch_size << " runs x " << o.iterations << " iterations (steady tracks: "
                       << (t.batch_size > 0 ? t.batch_size : o.batch_size) << " x "
                       << (t.iterations > 0 ? t.iterations : o.iterations) << "), backend "
-                      << (work_.refiner ? work_.refiner->backend() : std::string("none")));
+                      << backend);
 }
 
-void RefinerNodelet::loadObjects() {
+std::unique_ptr<diffdope::Refiner> RefinerNodelet::loadObjects(WorkerOptions& options) {
   ros::NodeHandle& pnh = getPrivateNodeHandle();
   const diffdope::PackageResolver resolver = [](const std::string& pkg) { return ros::package::getPath(pkg); };
   diffdope::ObjectsConfig cfg;
+  std::unique_ptr<diffdope::Refiner> refiner;
   try {
     if (!settings_.error.empty()) throw std::invalid_argument(settings_.error);
     if (settings_.objects_config.empty())
@@ -81,13 +88,13 @@ void RefinerNodelet::loadObjects() {
     // Class ids the objects file gives (DOPE's config_pose.yaml has them); ~class_ids, when set, wins.
     for (const diffdope::ObjectConfig& o : cfg.objects)
       if (o.class_id >= 0) settings_.class_ids.emplace(o.name, o.class_id);
-    work_.refiner_options = cfg.refiner;
+    options.refiner = cfg.refiner;
     // The optional refiner file overrides the objects file's refiner section (launch-time tuning).
     if (!settings_.refiner_config.empty())
-      work_.refiner_options = diffdope::RefinerOptions::from_yaml_file(settings_.refiner_config, cfg.refiner);
+      options.refiner = diffdope::RefinerOptions::from_yaml_file(settings_.refiner_config, cfg.refiner);
     // Then the ~parameters of the runtime settings (cfg/Refiner.cfg: iterations, image_scale, loss weights...),
     // checked as the YAML's are.
-    const RuntimeSettings launch_values{mode_, work_.refiner_options, work_.track_options, work_.publish_implausible};
+    const RuntimeSettings launch_values{mode_, options.refiner, options.track, options.publish_implausible};
     RefinerConfig launch = to_config(launch_values);
     launch.__fromMessage__(settings_.runtime_parameters);  // (read with the other settings)
     launch.mode = to_string(mode_);  // (read with the settings, with its own message)
@@ -101,18 +108,18 @@ void RefinerNodelet::loadObjects() {
                                                               "the parameter server until deleted)");
     const std::string bound = bound_warning(overrides);
     if (!bound.empty()) errors_.warn("parameters", "~parameter " + bound);
-    work_.refiner_options = settings.refiner;
-    work_.track_options = settings.track;
-    if (!settings_.device.empty()) work_.refiner_options.device = settings_.device;
-    work_.refiner_options.validate();
+    options.refiner = settings.refiner;
+    options.track = settings.track;
+    if (!settings_.device.empty()) options.refiner.device = settings_.device;
+    options.refiner.validate();
     // One refiner (and renderer: CUDA keeps the meshes on the device) for the node's life; "cuda" without a
     // device throws here, "auto" falls back to the CPU with one line.
-    work_.refiner = std::make_unique<diffdope::Refiner>(work_.refiner_options);
+    refiner = std::make_unique<diffdope::Refiner>(options.refiner);
     std::lock_guard<std::mutex> lock(handover_.mutex);
-    handover_.stats.backend = work_.refiner->backend();
+    handover_.stats.backend = refiner->backend();
   } catch (const std::exception& e) {
     errors_.error("config", std::string("configuration error, no object will be refined: ") + e.what());
-    return;
+    return nullptr;
   }
   if (settings_.use_mask) {  // several objects reading "any nonzero pixel" would all get the union of their masks
     int any = 0;
@@ -127,10 +134,10 @@ void RefinerNodelet::loadObjects() {
     slot->config = config;
     try {
       slot->mesh = std::make_unique<diffdope::Mesh>(diffdope::load_object_mesh(slot->config));
-      work_.refiner->prepare(*slot->mesh);  // its first detection then pays no set-up
+      refiner->prepare(*slot->mesh);  // its first detection then pays no set-up
       // Detections within one diameter of an instance's last known centre are that instance's.
       slot->tracks = std::make_unique<diffdope::InstanceTracks>(
-          slot->config.max_instances, work_.track_options, slot->mesh->center().cast<double>(), slot->mesh->diameter());
+          slot->config.max_instances, options.track, slot->mesh->center().cast<double>(), slot->mesh->diameter());
       NODELET_INFO_STREAM("object '" << slot->config.name << "': " << slot->mesh->num_triangles() << " triangles, "
                                      << "diameter " << format_fixed(slot->mesh->diameter()) << " m, box centre ("
                                      << format_fixed(slot->mesh->center().x()) << ", "
@@ -154,6 +161,7 @@ void RefinerNodelet::loadObjects() {
     }
     slots_.push_back(std::move(slot));
   }
+  return refiner;
 }
 
 void RefinerNodelet::onFrame(std::shared_ptr<Frame> frame) {
@@ -172,30 +180,18 @@ void RefinerNodelet::onWatchdog(const ros::WallTimerEvent&) {
   inputs_.sync.checkSynchronization();
   // force_update: this timer already paces it (1 s of wall time). update() gates on ros::Time, which under sim
   // time stops publishing after the clock jumps back (a looped bag) until it catches up again.
-  if (outputs_.diagnostics) outputs_.diagnostics->force_update();
+  if (publishers_.diagnostics) publishers_.diagnostics->force_update();
 }
 
 RefinerNodelet::~RefinerNodelet() {
   reconfigure_.server.reset();  // (its callback uses the members below)
-  {
-    std::lock_guard<std::mutex> lock(handover_.mutex);
-    handover_.stop = true;
-    for (auto& r : handover_.requests) {
-      diffdope_ros::Refine::Response res;
-      res.success = false;
-      res.message = "the refiner is shutting down";
-      r->response.set_value(res);
-    }
-    handover_.requests.clear();
-  }
-  handover_.cv.notify_all();
-  if (worker_.joinable()) worker_.join();
+  if (worker_) worker_->stop();  // answers the ~refine calls still waiting
   inputs_.watchdog.stop();
   if (inputs_.service_spinner) inputs_.service_spinner->stop();
   inputs_.refine_service.shutdown();
   inputs_.sync.shutdown();
   if (inputs_.inbox) inputs_.inbox->shutdown();
-  outputs_.diagnostics.reset();
+  publishers_.diagnostics.reset();
 }
 
 }  // namespace diffdope_ros

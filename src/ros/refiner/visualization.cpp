@@ -1,4 +1,4 @@
-// RefinerNodelet's visual outputs, computed only while someone subscribes: the overlay image (initial and refined
+// The Worker's visual outputs, computed only while someone subscribes: the overlay image (initial and refined
 // outlines over the RGB image) and the meshes as rviz markers.
 #include <cv_bridge/cv_bridge.h>
 #include <opencv2/imgproc.hpp>
@@ -6,17 +6,17 @@
 #include <visualization_msgs/MarkerArray.h>
 
 #include "diffdope_ros/conversions.hpp"
-#include "ros/refiner/refiner_nodelet.hpp"
+#include "ros/refiner/worker.hpp"
 
 namespace diffdope_ros {
 
-void RefinerNodelet::publishOverlay(const Frame& frame, const TargetList& targets,
+void Worker::publishOverlay(const Frame& frame, const TargetList& targets,
                                     const std::vector<diffdope::RefineResult>& results) {
   cv::Mat canvas;
   frame.observation.rgb.convertTo(canvas, CV_8UC3, 255.0);
   cv::cvtColor(canvas, canvas, cv::COLOR_RGB2BGR);
-  if (!work_.overlay_renderer) work_.overlay_renderer = diffdope::make_cpu_renderer(work_.refiner_options.render);
-  diffdope::Renderer* renderer = work_.overlay_renderer.get();
+  if (!overlay_renderer_) overlay_renderer_ = diffdope::make_cpu_renderer(options_.refiner.render);
+  diffdope::Renderer* renderer = overlay_renderer_.get();
   for (size_t k = 0; k < results.size(); ++k) {
     const Slot& s = *slots_[targets[k].first];
     const std::string& name = s.instances[size_t(targets[k].second)].name;
@@ -33,16 +33,16 @@ void RefinerNodelet::publishOverlay(const Frame& frame, const TargetList& target
     };
     outline(r.initial_pose, cv::Scalar(0, 200, 255), 1);                                   // initial: amber
     outline(r.pose, r.plausible ? cv::Scalar(60, 220, 60) : cv::Scalar(40, 40, 230), 2);  // refined: green / red
-    if (!(r.pose.t.z() > work_.refiner_options.render.near_plane)) continue;
+    if (!(r.pose.t.z() > options_.refiner.render.near_plane)) continue;
     const Eigen::Vector2d c = frame.camera.project(r.pose.t);
     if (!c.allFinite() || std::abs(c.x()) > 1e5 || std::abs(c.y()) > 1e5) continue;
     cv::putText(canvas, name + (r.plausible ? "" : " (implausible)"), cv::Point(int(c.x()), int(c.y())),
                 cv::FONT_HERSHEY_SIMPLEX, 0.5, cv::Scalar(255, 255, 255), 1, cv::LINE_AA);
   }
-  outputs_.overlay.publish(cv_bridge::CvImage(frame.header, sensor_msgs::image_encodings::BGR8, canvas).toImageMsg());
+  publishers_.overlay.publish(cv_bridge::CvImage(frame.header, sensor_msgs::image_encodings::BGR8, canvas).toImageMsg());
 }
 
-void RefinerNodelet::publishMarkers(const Frame& frame, const TargetList& targets,
+void Worker::publishMarkers(const Frame& frame, const TargetList& targets,
                                     const std::vector<diffdope::RefineResult>& results) {
   visualization_msgs::MarkerArray markers;
   for (size_t k = 0; k < results.size(); ++k) {
@@ -57,14 +57,14 @@ void RefinerNodelet::publishMarkers(const Frame& frame, const TargetList& target
     m.action = results[k].error.empty() ? int(visualization_msgs::Marker::ADD) : int(visualization_msgs::Marker::DELETE);
     m.pose = pose_to_msg(results[k].pose);  // the mesh's own frame
     m.scale.x = m.scale.y = m.scale.z = s.config.mesh_scale;
-    m.lifetime = ros::Duration(work_.track_options.track_timeout);  // a lost object does not stay drawn
+    m.lifetime = ros::Duration(options_.track.track_timeout);  // a lost object does not stay drawn
     m.color.r = results[k].plausible ? 0.2f : 0.9f;
     m.color.g = results[k].plausible ? 0.9f : 0.2f;
     m.color.b = 0.2f;
     m.color.a = 0.8f;
     markers.markers.push_back(m);
   }
-  outputs_.markers.publish(markers);
+  publishers_.markers.publish(markers);
 }
 
 }  // namespace diffdope_ros

@@ -1,10 +1,43 @@
-// RefinerNodelet's worker thread: takes ~refine calls first, else the newest frame; applies reconfigured values
+// The Worker's thread (worker.hpp): takes ~refine calls first, else the newest frame; applies reconfigured values
 // between jobs; refines streamed frames from their detections and tracks.
-#include "ros/refiner/refiner_nodelet.hpp"
+#include "ros/refiner/worker.hpp"
 
 #include "diffdope_ros/conversions.hpp"
+#include "ros/refiner/input_sync.hpp"  // report_input_error
 
 namespace diffdope_ros {
+
+Worker::Worker(const WorkerOptions& options, std::unique_ptr<diffdope::Refiner> refiner,
+               const RefinerSettings& settings, ErrorReporter& errors, const Slots& slots, DetectionInbox& inbox,
+               const Publishers& publishers, Handover& handover)
+    : options_(options),
+      refiner_(std::move(refiner)),
+      settings_(settings),
+      errors_(errors),
+      slots_(slots),
+      inbox_(inbox),
+      publishers_(publishers),
+      handover_(handover) {}
+
+Worker::~Worker() { stop(); }
+
+void Worker::start() { thread_ = std::thread([this] { loop(); }); }
+
+void Worker::stop() {
+  {
+    std::lock_guard<std::mutex> lock(handover_.mutex);
+    handover_.stop = true;
+    for (auto& r : handover_.requests) {
+      diffdope_ros::Refine::Response res;
+      res.success = false;
+      res.message = "the refiner is shutting down";
+      r->response.set_value(res);
+    }
+    handover_.requests.clear();
+  }
+  handover_.cv.notify_all();
+  if (thread_.joinable()) thread_.join();
+}
 
 void convert_frame(Frame& frame) {
   frame.observation.rgb = rgb_from_image(*frame.rgb_msg);
@@ -13,7 +46,7 @@ void convert_frame(Frame& frame) {
   frame.converted = true;
 }
 
-void RefinerNodelet::workerLoop() {
+void Worker::loop() {
   while (true) {
     std::shared_ptr<Request> job;
     std::shared_ptr<Frame> frame;
@@ -77,7 +110,7 @@ void RefinerNodelet::workerLoop() {
   }
 }
 
-void RefinerNodelet::applyPendingSettings() {
+void Worker::applyPendingSettings() {
   std::optional<RuntimeSettings> settings;
   {
     std::lock_guard<std::mutex> lock(handover_.mutex);
@@ -92,24 +125,24 @@ void RefinerNodelet::applyPendingSettings() {
     errors_.error("reconfigure", std::string("reconfigured values not applied: ") + e.what());
     try {  // back to the values in force (valid: they were accepted before)
       for (auto& slot : slots_)
-        if (slot->tracks) slot->tracks->set_options(work_.track_options);
+        if (slot->tracks) slot->tracks->set_options(options_.track);
     } catch (const std::exception&) {
     }
     return;
   }
-  work_.refiner_options = settings->refiner;
-  work_.track_options = settings->track;
-  work_.publish_implausible = settings->publish_implausible;
+  options_.refiner = settings->refiner;
+  options_.track = settings->track;
+  options_.publish_implausible = settings->publish_implausible;
 }
 
-std::vector<TargetObject> RefinerNodelet::targetObjects() const {
+std::vector<TargetObject> Worker::targetObjects() const {
   std::vector<TargetObject> objects;
   for (const auto& slot : slots_)
     objects.push_back({slot->config.name, slot->config.max_instances, slot->disabled_reason, slot->tracks.get()});
   return objects;
 }
 
-void RefinerNodelet::processStreaming(const std::shared_ptr<const Frame>& frame) {
+void Worker::processStreaming(const std::shared_ptr<const Frame>& frame) {
   if (!frame) return;
   resetOnTimeJump(*frame);
   absorbDetections(*frame);
@@ -119,13 +152,13 @@ void RefinerNodelet::processStreaming(const std::shared_ptr<const Frame>& frame)
   // skipped is logged; only a ~refine call's reply lists it too.)
   if (!targets.seeds.empty())
     refineAndPublish(*frame, targets.seeds,
-                     targets.all_steady ? diffdope::tracked_options(work_.refiner_options, work_.track_options)
-                                        : work_.refiner_options,
+                     targets.all_steady ? diffdope::tracked_options(options_.refiner, options_.track)
+                                        : options_.refiner,
                      nullptr);
   updateTrackingFlags(stamp);
 }
 
-void RefinerNodelet::updateTrackingFlags(double stamp) {
+void Worker::updateTrackingFlags(double stamp) {
   for (auto& slot : slots_) {
     int n = 0;
     for (int k = 0; slot->tracks && k < slot->tracks->size(); ++k) n += slot->tracks->track(k).tracking(stamp);
