@@ -30,8 +30,7 @@ struct CalibrationCapture {
 struct CalibrationOptions {
   RefinerOptions refiner = default_refiner();
   /// Descents in a row, each from the one before's result ([1, 10]): the second polishes what the first's
-  /// decayed rates left (generated arm, 10 cm / 20 degrees off: median 3.7 mm / 0.17 degrees of the camera's
-  /// position after one pass of 300 iterations, 0.3 mm / 0.02 degrees after two; docs/calibration.md).
+  /// decayed rates left (figures: docs/calibration.md).
   int passes = 2;
   /// Each later pass's learning rates relative to the pass before's: the first pass's decay continued, so the
   /// last settles where the first's rates still step across the minimum; (0, 1], 1 = every pass alike.

@@ -2,6 +2,7 @@
 // The refiner: the paper's Algorithm 1 (Diff-DOPE). B gradient-descent runs start from the same initial pose,
 // run i with its own learning rate drawn from [lr_low, lr_high] and decayed as lr_i * lr_decay^(k/iters);
 // plain gradient descent, no momentum; the run with the lowest loss wins.
+#include <array>
 #include <cstdint>
 #include <functional>
 #include <limits>
@@ -84,9 +85,9 @@ struct RefinerOptions {
   double retry_turn = 0.52;  // [0, pi]
   /// Polish: after the descent and the shape scan's choice, before the print alignment, polish_runs runs go on
   /// from the chosen pose for polish_iterations more steps at image_scale, at small rates (lr_low, doubling
-  /// per run, decayed as the descent's), and the lowest loss seen is kept. The descent's winners from hard
-  /// starts are mostly large-rate runs still hopping 1-3 mm about the minimum when the iterations end
-  /// (docs/benchmarks.md). 0 = off (the paper's algorithm); never for tracked starts (ObjectTarget::start_kind
+  /// per run, decayed as the descent's), and the lowest loss seen is kept: the descent's winners from hard
+  /// starts are mostly large-rate runs whose decayed steps still hop about the minimum when the iterations end
+  /// (figures: docs/benchmarks.md). 0 = off (the paper's algorithm); never for tracked starts (ObjectTarget::start_kind
   /// kTracked) nor with iterations 0 (scoring the start).
   int polish_iterations = 30;  // [0, kMaxIterations]
   int polish_runs = 4;         // [1, 16]
@@ -115,7 +116,7 @@ struct RefinerOptions {
   int early_stop_patience = 0;          // [0, kMaxIterations]
   double early_stop_tolerance = 1e-4;   // [0, 1]
   /// Speed: at 25 %, 50 % and 75 % of the iterations keep only the better half of the runs (by their best loss
-  /// so far). Less than half the work; the winner almost never comes from a dropped half (docs/benchmarks.md).
+  /// so far): less than half the evaluations; what it costs in accuracy: docs/benchmarks.md.
   /// false = the paper's algorithm exactly (every run goes to the end).
   bool successive_halving = true;
   /// Without an observed mask: how far the object may be from its start, as a fraction of its size. With depth
@@ -183,6 +184,21 @@ struct RefinerOptions {
   void validate() const;
 };
 
+/// The stages of one object's refinement, in the order they run: the descent (every run's iterations, the shape
+/// scan, and without a mask the derivations of the object's pixels), then the stages the chosen result goes
+/// through. RefineResult::stage_evaluations counts what each made; planned_evaluations(o, stage) bounds it.
+enum class RefineStage {
+  kDescent,
+  kWeighStarts,        // the starts' losses at the fine scale, after a coarse phase
+  kWeighCandidate,     // the shape scan's candidate against the start's basin
+  kDerivePixels,       // without a mask: the object's pixels derived about the result
+  kPolish,             // RefinerOptions::polish_iterations
+  kAlignPrintAndStep,  // RefinerOptions::print_search, then RefinerOptions::newton_rounds
+  kWeighShapeTurns,    // the result's shape-equivalent turns weighed by the print
+  kScore,              // the result's scores, curvature and verdict
+};
+constexpr int kRefineStages = 8;
+
 /// What a refinement did, with scores a caller can threshold.
 struct RefineResult {
   Pose pose;                          // refined model pose in the camera frame (metres)
@@ -227,6 +243,8 @@ struct RefineResult {
   double time_ms = 0;                 // wall time of refine() (refine_all(): from the call's start to this object's end)
   long evaluations = 0;               // hypothesis evaluations made (renders of one pose, with or without loss and
                                       // gradient; a retry's included): what planned_evaluations() bounds
+  std::array<long, kRefineStages> stage_evaluations{};  // evaluations by RefineStage (a retry's included):
+                                      // their sum is `evaluations`
   // Quality scores at the refined pose (at the refiner's image scale).
   double mask_iou = -1;               // IoU of rendered and observed masks (with depth, the render less where the
                                       // observed depth shows an occluder in front: loss.occlusion_margin);
@@ -370,7 +388,8 @@ class Refiner {
   /// Optional progress callback, called once per iteration of refine() (iteration 0..total, total = the
   /// configured iterations) with the best loss of any run so far; a retried refinement (retry_turn) counts
   /// 0..total again for its second pass.
-  std::function<void(int iteration, int total, double best_loss)> on_iteration;
+  using Progress = std::function<void(int iteration, int total, double best_loss)>;
+  Progress on_iteration;
 
  private:
   /// `o`, validated and checked against the renderer's device and render options.
@@ -383,7 +402,6 @@ class Refiner {
   bool is_declared_turn(const RefinerOptions& o, const Mesh& mesh, const Pose& turn) const;
   /// The shape analysis of `mesh`, computed once per mesh.
   const std::vector<ShapeRotation>& shape_rotations(const Mesh& mesh);
-  using Progress = std::function<void(int iteration, int total, double best_loss)>;
   /// refine() and refine_all(): a pass, then the retry of the rejected fresh starts (RefinerOptions::retry_turn).
   /// `progress`: on_iteration (refine()), or null.
   std::vector<RefineResult> refine_targets(const RefinerOptions& o, const Camera& camera, const Observation& frame,
@@ -402,14 +420,26 @@ class Refiner {
   std::map<std::pair<uint64_t, double>, std::optional<ShapeRotation>> revolution_fits_;  // by (mesh, tolerance)
 };
 
-/// Hypothesis evaluations (one render + loss + gradient of one pose) that refining one object with `o` costs at
-/// most: the runs of every iteration, less those successive halving drops, the shape scan as for a shape with
-/// the most turns (kMaxShapeTurns; an asymmetric one has none) and its candidate run, the polish, the print
-/// alignment and the Newton steps (each twice: they run again when the steps move far), the result's shape turns
-/// weighed by the print (and the same stages from the one it prefers) and the final scoring.
-/// An early stop (of the descent, the polish or the Newton rounds) only lowers it; a retry of a rejected result
-/// (retry_turn) doubles it for that object. The unit of RefineTimeEstimator (refine_time.hpp).
+/// Hypothesis evaluations (one render + loss + gradient of one pose, in one view) that refining one object with
+/// `o` costs at most: the sum of every stage's planned_evaluations(o, stage). An early stop (of the descent, the
+/// polish or the Newton rounds) only lowers it; a retry of a rejected result (retry_turn) doubles it for that
+/// object. The unit of RefineTimeEstimator (refine_time.hpp).
 long planned_evaluations(const RefinerOptions& o);
+/// What `stage` costs at most, in the same unit, with one start (a tracked start's two cost one evaluation more):
+///   - kDescent: the runs of every iteration, less those successive halving drops; the shape scan as for a shape
+///     with the most turns (kMaxShapeTurns; an asymmetric one has none) and its candidate run; without a mask
+///     (derive_mask), the renders the object's pixels are derived about (the starts, then the better half of the
+///     runs);
+///   - kWeighStarts: the start's loss at the fine scale; kWeighCandidate: the print's registration at the
+///     candidate and at the start's basin;
+///   - kDerivePixels (derive_mask): the render the pixels are derived about at the result, and the result's and
+///     the starts' losses under them;
+///   - kPolish; kAlignPrintAndStep: the print alignment and the Newton steps, each twice (they run again when the
+///     steps move far);
+///   - kWeighShapeTurns: a registration per shape turn, then the loss, polish, alignment and steps from the one
+///     the print prefers;
+///   - kScore: the scoring render and the curvature probe.
+long planned_evaluations(const RefinerOptions& o, RefineStage stage);
 
 /// One plain gradient step of the refiner's parametrisation: translation of the object's centre `pivot`
 /// (camera frame) and rotation about it, with the scaling described at RefinerOptions::lr_low.

@@ -3,6 +3,7 @@
 #include <Eigen/Cholesky>
 #include <Eigen/Geometry>
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <limits>
 #include <opencv2/imgproc.hpp>
@@ -30,8 +31,7 @@ double RefineRun::print_significance(Renderer& renderer, const Pose& pose) {
   // A continuous declared symmetry turns the print with the object: it cannot be registered along that axis.
   if (meshes_.size() != 1 || !fine_[0].obs.has_rgb() || !meshes_[0]->symmetry.continuous.empty())
     return std::numeric_limits<double>::quiet_NaN();
-  ++evaluations_;
-  return register_render(renderer.render(fine_[0].cam, *meshes_[0], {pose}, fine_[0].obs.mask)[0]).significance();
+  return register_render(render_view(renderer, 0, pose)).significance();
 }
 
 double jump_margin(double angle) { return kJumpMargin * (1.0 + 4.0 * std::abs(angle) / M_PI); }
@@ -88,10 +88,8 @@ double RefineRun::residual_count(Renderer& renderer, const Pose& pose) {
   // the render), in every view.
   double pixels = 0;
   for (size_t v = 0; v < meshes_.size(); ++v) {
-    const cv::Mat& mask = fine_[v].obs.mask;
-    const RenderImage img = renderer.render(fine_[v].cam, *meshes_[v], {pose}, mask)[0];
-    ++evaluations_;
-    pixels += cv::countNonZero((mask >= 0.5f) | (img.coverage >= 0.5f));
+    const RenderImage img = render_view(renderer, v, pose);
+    pixels += cv::countNonZero((fine_[v].obs.mask >= 0.5f) | (img.coverage >= 0.5f));
   }
   return std::max(1.0, pixels / kCorrelatedPixels);
 }
@@ -171,43 +169,73 @@ namespace {
 bool same_pose(const Pose& a, const Pose& b) { return a.R == b.R && a.t == b.t; }
 }  // namespace
 
-double RefineRun::PrintAtPose::at(Renderer& renderer, const Pose& pose) {
-  if (pixels != run.pixels_version_ || !same_pose(pose, measured)) set(pose, run.print_significance(renderer, pose));
-  return z;
+double RefineRun::Candidate::print(Renderer& renderer) {
+  if (pixels_ != run_.pixels_version_ || !same_pose(result.pose, measured_))
+    set_print(run_.print_significance(renderer, result.pose));
+  return z_;
 }
 
-void RefineRun::PrintAtPose::set(const Pose& pose, double significance) {
-  measured = pose;
-  pixels = run.pixels_version_;
-  z = significance;
+void RefineRun::Candidate::set_print(double significance) {
+  measured_ = result.pose;
+  pixels_ = run_.pixels_version_;
+  z_ = significance;
 }
+
+namespace {
+
+/// Books the evaluations made (a running count) to each stage as it ends.
+class StageLedger {
+ public:
+  StageLedger(std::array<long, kRefineStages>& booked, const long& made) : booked_(booked), made_(made) {}
+  void end(RefineStage stage) {
+    booked_[size_t(stage)] += made_ - at_;
+    at_ = made_;
+  }
+
+ private:
+  std::array<long, kRefineStages>& booked_;
+  const long& made_;
+  long at_ = 0;
+};
+
+}  // namespace
 
 RefineResult RefineRun::finish(Renderer& renderer) {
-  RefineResult res = start_result();
-  if (switch_at_ > 0) weigh_starts(renderer, res);
-  PrintAtPose print{*this};
-  weigh_candidate(renderer, res, print);
-  derive_pixels_at_result(renderer, res);
+  Candidate c = start_candidate();
+  RefineResult& res = c.result;
+  StageLedger ledger(res.stage_evaluations, evaluations_);
+  ledger.end(RefineStage::kDescent);
+  if (switch_at_ > 0) weigh_starts(renderer, c);
+  ledger.end(RefineStage::kWeighStarts);
+  weigh_candidate(renderer, c);
+  ledger.end(RefineStage::kWeighCandidate);
+  derive_pixels_at_result(renderer, c);
+  ledger.end(RefineStage::kDerivePixels);
   polish(renderer, res);
-  align_print_and_step(renderer, res, print);
-  weigh_shape_turns(renderer, res, print);
+  ledger.end(RefineStage::kPolish);
+  align_print_and_step(renderer, c);
+  ledger.end(RefineStage::kAlignPrintAndStep);
+  weigh_shape_turns(renderer, c);
+  ledger.end(RefineStage::kWeighShapeTurns);
   // Of the poses a declared symmetry makes equivalent, the one nearest the start: a track does not spin.
   if (meshes_.size() == 1) res.pose = meshes_.front()->symmetry.nearest_equivalent(res.pose, res.initial_pose.R);
-  judge_result(renderer, res, score_views(renderer, res));
-  return res;
+  judge_result(renderer, res, meshes_.size() == 1 ? score_view(renderer, res) : score_views(renderer, res));
+  ledger.end(RefineStage::kScore);
+  return std::move(res);
 }
 
-RefineResult RefineRun::start_result() {
+RefineRun::Candidate RefineRun::start_candidate() {
   RefineResult res = std::move(res_);
   const int runs = int(best_.size());
   res.run_losses.resize(size_t(runs));
   for (int i = 0; i < runs; ++i) res.run_losses[size_t(i)] = best_[size_t(i)].total;
   res.run_poses = best_pose_;
   take(res, lowest(res, 0, options_.batch_size));  // the start's own basin
-  return res;
+  return Candidate(*this, std::move(res));
 }
 
-void RefineRun::derive_pixels_at_result(Renderer& renderer, RefineResult& res) {
+void RefineRun::derive_pixels_at_result(Renderer& renderer, Candidate& c) {
+  RefineResult& res = c.result;
   if (!derives_pixels_ || !std::isfinite(res.loss.total) ||
       !derive_pixels(renderer, {res.pose}, options_.inlier_threshold))
     return;
@@ -217,13 +245,14 @@ void RefineRun::derive_pixels_at_result(Renderer& renderer, RefineResult& res) {
   std::vector<LossValue> v;
   evaluate_fine(renderer, {res.pose}, loss_, Gradients::kSkip, v);
   res.loss = v[0];
-  weigh_starts(renderer, res);
+  weigh_starts(renderer, c);
 }
 
-void RefineRun::align_print_and_step(Renderer& renderer, RefineResult& res, PrintAtPose& print) {
+void RefineRun::align_print_and_step(Renderer& renderer, Candidate& c) {
+  RefineResult& res = c.result;
   for (int pass = 0; pass < kAlignmentPasses; ++pass) {
     const Pose before = res.pose;
-    align_result_print(renderer, res, print);
+    align_result_print(renderer, c);
     if (pass > 0 && same_pose(res.pose, before)) return;  // nothing turned: the steps have converged there
     const double aligned_loss = res.loss.total;
     newton(renderer, res);
@@ -233,7 +262,8 @@ void RefineRun::align_print_and_step(Renderer& renderer, RefineResult& res, Prin
   }
 }
 
-void RefineRun::weigh_starts(Renderer& renderer, RefineResult& res) {
+void RefineRun::weigh_starts(Renderer& renderer, Candidate& c) {
+  RefineResult& res = c.result;
   // The first iteration was at the coarse scale: the initial loss at the fine one, of the starts that got a run
   // (as at k = 0).
   std::vector<LossValue> v;
@@ -254,7 +284,8 @@ void RefineRun::weigh_starts(Renderer& renderer, RefineResult& res) {
   }
 }
 
-void RefineRun::weigh_candidate(Renderer& renderer, RefineResult& res, PrintAtPose& print) {
+void RefineRun::weigh_candidate(Renderer& renderer, Candidate& c) {
+  RefineResult& res = c.result;
   // A shape-scan candidate replaces the start's basin only when, both converged, the evidence is clear enough
   // for how far it jumps (jump_is_supported): silhouette and depth barely tell such turns apart.
   const int candidate = lowest(res, options_.batch_size, int(best_.size()));
@@ -264,17 +295,18 @@ void RefineRun::weigh_candidate(Renderer& renderer, RefineResult& res, PrintAtPo
     take(res, candidate);  // every run from the starts left the image: the candidate is all there is
     res.scan_taken = true;
   } else if (std::isfinite(res.loss.total) && candidate_loss < res.loss.total) {
-    const JumpEvidence basin{res.loss.total, print.at(renderer, res.pose)};
+    const JumpEvidence basin{res.loss.total, c.print(renderer)};
     const JumpEvidence jump{candidate_loss, print_significance(renderer, best_pose_[size_t(candidate)])};
     if (jump_is_supported(basin, jump, jump_angle_[size_t(candidate)], options_.min_print_significance > 0)) {
       take(res, candidate);
       res.scan_taken = true;
-      print.set(res.pose, jump.print);
+      c.set_print(jump.print);
     }
   }
 }
 
-void RefineRun::align_result_print(Renderer& renderer, RefineResult& res, PrintAtPose& print) {
+void RefineRun::align_result_print(Renderer& renderer, Candidate& c) {
+  RefineResult& res = c.result;
   // The turn may cost up to kPrintLossTolerance of loss only because a mask or depth holds every other degree of
   // freedom: with RGB alone that loss is the print comparison itself, and a turn that moves the handle (unseen
   // without a mask) to where the print fits slightly better would be taken 30-40 degrees from the truth.
@@ -302,16 +334,17 @@ void RefineRun::align_result_print(Renderer& renderer, RefineResult& res, PrintA
   // registration must not contradict the turn, and must register where it turned (turn_is_supported).
   if (!(v[0].total <= (1.0 + kPrintLossTolerance) * res.loss.total)) return;
   const double z_aligned = print_significance(renderer, aligned);
-  if (!turn_is_supported(print.at(renderer, res.pose), z_aligned, options_.min_print_significance)) return;
+  if (!turn_is_supported(c.print(renderer), z_aligned, options_.min_print_significance)) return;
   res.print_turn += angle;
   res.pose = aligned;
   res.loss = v[0];
-  print.set(aligned, z_aligned);
+  c.set_print(z_aligned);
 }
 
 double print_jump_bar(double angle) { return kClearPrint * (1.0 + std::abs(angle) / M_PI); }
 
-void RefineRun::weigh_shape_turns(Renderer& renderer, RefineResult& res, PrintAtPose& print) {
+void RefineRun::weigh_shape_turns(Renderer& renderer, Candidate& c) {
+  RefineResult& res = c.result;
   // The scan compared the shape-equivalent turns early, by a loss that barely sees the print, and a hard start
   // (or a detector's cuboid, ambiguous by the same turns) can converge on a box's back face. Between such poses
   // silhouette and depth cannot decide; the print and the colour can, once converged. Only with a mask or depth:
@@ -319,7 +352,7 @@ void RefineRun::weigh_shape_turns(Renderer& renderer, RefineResult& res, PrintAt
   // be the print comparison itself, as for the print alignment).
   const bool held = has_mask_ || fine_[0].obs.has_depth();
   if (turns_.empty() || !held || !(options_.min_print_significance > 0) || !std::isfinite(res.loss.total)) return;
-  const double z = print.at(renderer, res.pose);
+  const double z = c.print(renderer);
   if (!std::isfinite(z)) return;
   int best = -1;
   double best_z = z;
@@ -329,15 +362,15 @@ void RefineRun::weigh_shape_turns(Renderer& renderer, RefineResult& res, PrintAt
   }
   if (best < 0) return;
   // The turn the print prefers, converged as the result was (polish, print alignment, Newton steps).
-  RefineResult turned = res;
+  Candidate turned_candidate(*this, res);
+  RefineResult& turned = turned_candidate.result;
   turned.pose = res.pose * turns_[size_t(best)];
   std::vector<LossValue> v;
   evaluate_fine(renderer, {turned.pose}, loss_, Gradients::kSkip, v);
   turned.loss = v[0];
-  PrintAtPose turned_print(*this);
   polish(renderer, turned);
-  align_print_and_step(renderer, turned, turned_print);
-  const double z_turned = turned_print.at(renderer, turned.pose);
+  align_print_and_step(renderer, turned_candidate);
+  const double z_turned = turned_candidate.print(renderer);
   if (!std::isfinite(turned.loss.total) || !std::isfinite(z_turned)) return;
   const double turn = Eigen::AngleAxisd(res.pose.R.transpose() * turned.pose.R).angle();
   // It replaces the result when its print registers clearly better: converged, silhouette and depth fit both alike.
@@ -345,7 +378,7 @@ void RefineRun::weigh_shape_turns(Renderer& renderer, RefineResult& res, PrintAt
     turned.shape_turn = turn;
     turned.rival_print = z;
     res = std::move(turned);
-    print.set(res.pose, z_turned);
+    c.set_print(z_turned);
     return;
   }
   // Otherwise it is the result's rival when it stayed a pose of its own (one that converged back nearer the
@@ -355,71 +388,86 @@ void RefineRun::weigh_shape_turns(Renderer& renderer, RefineResult& res, PrintAt
   if (turn > 0.5 * turned_by && turned.loss.total <= res.loss.total) res.rival_print = z_turned;
 }
 
+RefineResult::ViewScores RefineRun::view_scores(const RenderImage& img, size_t v) const {
+  const Observation& obs = fine_[v].obs;
+  RefineResult::ViewScores scores;
+  const cv::Mat rendered = img.coverage >= 0.5f;
+  if (has_mask_) {
+    // Where the observed depth shows an occluder in front of the render (as the loss's mask term), the object is
+    // hidden: its visible mask rightly leaves it out, so the render's IoU leaves it out too.
+    cv::Mat visible = rendered;
+    if (obs.has_depth() && loss_.occlusion_margin > 0) {
+      cv::Mat in_front = (obs.depth > 0) & (obs.depth < img.depth - loss_.occlusion_margin);
+      visible = rendered & ~in_front;
+    }
+    const cv::Mat observed_mask = obs.mask >= 0.5f;
+    const double inter = cv::countNonZero(visible & observed_mask), uni = cv::countNonZero(visible | observed_mask);
+    scores.mask_iou = uni > 0 ? inter / uni : 0.0;
+  }
+  if (obs.has_depth()) {
+    // Over the observed object, or (without a mask) over what the render covers: the window is not the object.
+    const cv::Mat object = has_mask_ ? cv::Mat(obs.mask >= 0.5f) : rendered;
+    const DepthAgreement agreement =
+        depth_agreement(obs.depth, img.depth, object, options_.inlier_threshold, options_.max_depth_noise);
+    scores.depth_inliers = std::max(agreement.inliers, 0.0);
+    scores.depth_noise = agreement.noise_at_1m;
+  }
+  return scores;
+}
+
+RenderImage RefineRun::render_view(Renderer& renderer, size_t v, const Pose& pose) {
+  ++evaluations_;
+  return renderer.render(fine_[v].cam, *meshes_[v], {pose}, fine_[v].obs.mask)[0];
+}
+
+int RefineRun::score_view(Renderer& renderer, RefineResult& res) {
+  const RenderImage img = render_view(renderer, 0, res.pose);
+  const RefineResult::ViewScores scores = view_scores(img, 0);
+  res.mask_iou = scores.mask_iou;
+  res.depth_inliers = scores.depth_inliers;
+  res.depth_noise = std::max(res.depth_noise, scores.depth_noise);
+  if (fine_[0].obs.has_rgb()) res.print = register_render(img);
+  return cv::countNonZero(img.coverage >= 0.5f);
+}
+
 int RefineRun::score_views(Renderer& renderer, RefineResult& res) {
-  // Quality scores at the refined pose, per view; the result's are the weakest view's.
-  const bool one_view = meshes_.size() == 1;
+  // Each view's scores and loss; the result's scores are the weakest view's (-1: not measured in any).
+  const auto weakest = [](double a, double b) { return a < 0 ? b : b < 0 ? a : std::min(a, b); };
   int rendered_pixels = 0;
   for (size_t v = 0; v < meshes_.size(); ++v) {
-    const Camera& cam = fine_[v].cam;
-    const Observation& obs = fine_[v].obs;
-    RefineResult::ViewScores scores;
-    const RenderImage img = renderer.render(cam, *meshes_[v], {res.pose}, obs.mask)[0];
+    const RenderImage img = render_view(renderer, v, res.pose);
+    rendered_pixels += cv::countNonZero(img.coverage >= 0.5f);
+    RefineResult::ViewScores scores = view_scores(img, v);
+    std::vector<LossValue> value;
+    renderer.evaluate(fine_[v].cam, *meshes_[v], fine_[v].obs, {res.pose}, loss_, false, value);
     ++evaluations_;
-    const cv::Mat rendered = img.coverage >= 0.5f;
-    rendered_pixels += cv::countNonZero(rendered);
-    if (has_mask_) {
-      // Where the observed depth shows an occluder in front of the render (as the loss's mask term), the object
-      // is hidden: its visible mask rightly leaves it out, so the render's IoU leaves it out too.
-      cv::Mat visible = rendered;
-      if (obs.has_depth() && loss_.occlusion_margin > 0) {
-        cv::Mat in_front = (obs.depth > 0) & (obs.depth < img.depth - loss_.occlusion_margin);
-        visible = rendered & ~in_front;
-      }
-      const cv::Mat observed_mask = obs.mask >= 0.5f;
-      const double inter = cv::countNonZero(visible & observed_mask), uni = cv::countNonZero(visible | observed_mask);
-      scores.mask_iou = uni > 0 ? inter / uni : 0.0;
-    }
-    if (obs.has_depth()) {
-      // Over the observed object, or (without a mask) over what the render covers: the window is not the object.
-      const cv::Mat object = has_mask_ ? cv::Mat(obs.mask >= 0.5f) : rendered;
-      const DepthAgreement agreement =
-          depth_agreement(obs.depth, img.depth, object, options_.inlier_threshold, options_.max_depth_noise);
-      scores.depth_inliers = std::max(agreement.inliers, 0.0);
-      scores.depth_noise = agreement.noise_at_1m;
-    }
-    if (one_view && obs.has_rgb()) res.print = register_render(img);
-    if (!one_view) {
-      std::vector<LossValue> value;
-      renderer.evaluate(cam, *meshes_[v], obs, {res.pose}, loss_, false, value);
-      ++evaluations_;
-      scores.loss = value[0].total;
-    }
-    const auto weakest = [](double a, double b) { return a < 0 ? b : b < 0 ? a : std::min(a, b); };
+    scores.loss = value[0].total;
     res.mask_iou = v == 0 ? scores.mask_iou : weakest(res.mask_iou, scores.mask_iou);
     res.depth_inliers = v == 0 ? scores.depth_inliers : weakest(res.depth_inliers, scores.depth_inliers);
     res.depth_noise = std::max(res.depth_noise, scores.depth_noise);
-    if (!one_view) res.view_scores.push_back(scores);
+    res.view_scores.push_back(scores);
   }
   return rendered_pixels;
 }
 
+void RefineRun::probe_curvature(Renderer& renderer, RefineResult& res) {
+  const double distance = options_.probe_distance;
+  if (!(distance > 0) || !std::isfinite(res.loss.total)) return;
+  if (meshes_.size() == 1) {
+    const Mesh& mesh = *meshes_[0];
+    res.curvature = probe_pose_curvature(renderer, fine_[0].cam, mesh, fine_[0].obs, loss_, res.pose, distance,
+                                         mesh.symmetry.free_twists(res.pose, res.pose * mesh.center()));
+  } else {  // views of one pose (a calibration's captures): their mean loss, about the common pivot
+    std::vector<ProbeView> views;
+    for (size_t v = 0; v < meshes_.size(); ++v) views.push_back({fine_[v].cam, *meshes_[v], fine_[v].obs});
+    res.curvature = probe_pose_curvature(renderer, views, loss_, res.pose, pivot_model_, distance);
+  }
+  evaluations_ += long(kCurvatureProbeEvaluations * meshes_.size());
+}
+
 void RefineRun::judge_result(Renderer& renderer, RefineResult& res, int rendered_pixels) {
   const RefinerOptions& o = options_;
-  const bool one_view = meshes_.size() == 1;
-  const Mesh& mesh0 = *meshes_.front();
-  if (o.probe_distance > 0 && std::isfinite(res.loss.total)) {
-    if (one_view) {
-      res.curvature =
-          probe_pose_curvature(renderer, fine_[0].cam, mesh0, fine_[0].obs, loss_, res.pose, o.probe_distance,
-                               mesh0.symmetry.free_twists(res.pose, res.pose * mesh0.center()));
-    } else {  // views of one pose (a calibration's captures): their mean loss, about the common pivot
-      std::vector<ProbeView> views;
-      for (size_t v = 0; v < meshes_.size(); ++v) views.push_back({fine_[v].cam, *meshes_[v], fine_[v].obs});
-      res.curvature = probe_pose_curvature(renderer, views, loss_, res.pose, pivot_model_, o.probe_distance);
-    }
-  }
-  if (o.probe_distance > 0 && std::isfinite(res.loss.total))
-    evaluations_ += long(kCurvatureProbeEvaluations * meshes_.size());
+  probe_curvature(renderer, res);
   res.pivot = res.pose * pivot_model_;
   res.covariance = pose_covariance(res.curvature, rendered_pixels, diameter_);
   const size_t n = res.history.size(), tail = std::max<size_t>(2, n / kConvergedTailDivisor);
@@ -430,8 +478,9 @@ void RefineRun::judge_result(Renderer& renderer, RefineResult& res, int rendered
   VerdictEvidence evidence;
   evidence.mask_iou = res.mask_iou;
   evidence.depth_inliers = res.depth_inliers;
-  // A continuous declared symmetry turns the print with the object: it cannot be registered along that axis.
-  if (one_view && mesh0.symmetry.continuous.empty()) {
+  // The print is registered in one view only; a continuous declared symmetry turns it with the object, so it
+  // cannot be registered along that axis.
+  if (meshes_.size() == 1 && meshes_[0]->symmetry.continuous.empty()) {
     evidence.print_significance = res.print.significance();
     evidence.rival_print_significance = res.rival_print;
   }

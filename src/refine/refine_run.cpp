@@ -239,7 +239,6 @@ void RefineRun::use_pixels(const cv::Mat& pixels) {
     Level& coarse = coarse_.front();
     cv::resize(pixels, coarse.obs.mask, cv::Size(coarse.cam.width, coarse.cam.height), 0, 0, cv::INTER_AREA);
   }
-  pixels_changed_ = true;
   ++pixels_version_;
 }
 
@@ -329,13 +328,13 @@ RefineRun::Step RefineRun::next_step(Renderer& renderer) {
     active_ = kept;
     std::sort(active_.begin(), active_.end());
   }
-  if ((k_ == switch_at_ && switch_at_ > 0) || pixels_changed_) {
+  if ((k_ == switch_at_ && switch_at_ > 0) || bests_pixels_ != pixels_version_) {
     // The fine phase begins, or the object's pixels were derived again: losses at the coarse scale, or under the
     // previous pixels, do not compare with these, so each run's best is sought again from here.
     for (LossValue& b : best_) b.total = std::numeric_limits<double>::infinity();
     best_overall_ = std::numeric_limits<double>::infinity();
     stale_ = 0;
-    pixels_changed_ = false;
+    bests_pixels_ = pixels_version_;
   }
   const Level& level = coarse() ? coarse_.front() : fine_.front();
   Step step;
@@ -401,8 +400,7 @@ void RefineRun::add_scan_candidates(const Step& scan, const std::vector<LossValu
   }
 }
 
-void RefineRun::absorb(const Step& step, const std::vector<LossValue>& values,
-                       const std::function<void(int, int, double)>& on_iteration) {
+void RefineRun::absorb(const Step& step, const std::vector<LossValue>& values, const Refiner::Progress& on_iteration) {
   const RefinerOptions& o = options_;
   const int iters = o.iterations, starts = int(initials_.size());
   const bool last = k_ == iters;

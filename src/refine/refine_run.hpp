@@ -82,8 +82,7 @@ class RefineRun {
   void evaluate_step(Renderer& renderer, const Step& step, std::vector<LossValue>& values);
   /// Takes the values of `step` (from next_step()), counts its evaluations, keeps each run's best and steps the
   /// runs (after the scan: adds the candidate run, without a step). `on_iteration`: Refiner::on_iteration.
-  void absorb(const Step& step, const std::vector<LossValue>& values,
-              const std::function<void(int, int, double)>& on_iteration);
+  void absorb(const Step& step, const std::vector<LossValue>& values, const Refiner::Progress& on_iteration);
   enum class Gradients { kSkip, kCompute };
   /// Evaluates `poses` in every view at the fine scale and gives each pose the mean over the views (terms, total
   /// and gradient: the views share the camera frame the gradient is in). Counted in RefineResult::evaluations.
@@ -129,13 +128,13 @@ class RefineRun {
   LossOptions loss_, scan_loss_;
   bool has_mask_ = false;  // the loss has a mask: given, or derived (derives_pixels_)
   // Derived object pixels: whether they are derived, how often so far, the iteration of the second derivation,
-  // and whether the runs' best losses (under the previous pixels) must be sought again.
+  // and which pixels the runs' best losses were measured under (under others they must be sought again).
   bool derives_pixels_ = false;
   bool weighs_given_mask_ = false;  // a mask was given and depth can check it (derive_mask, one view)
   int derivations_ = 0;
   int rederive_at_ = 0;
-  bool pixels_changed_ = false;
   int pixels_version_ = 0;  // counts use_pixels(): what a measurement at a pose was made under
+  int bests_pixels_ = 0;    // pixels_version_ the runs' bests were measured under
   /// derive_object_pixels() about `poses` within `margin` metres, at the fine scale and area-resized to the
   /// coarse one; false (the masks unchanged) when no pixel was found.
   bool derive_pixels(Renderer& renderer, const std::vector<Pose>& poses, double margin);
@@ -171,37 +170,55 @@ class RefineRun {
   int lowest(const RefineResult& res, int first, int last) const;
   /// Makes run `i`'s best the result.
   void take(RefineResult& res, int i) const;
-  /// The print significance of the last pose it was measured at, under the object pixels of then: measured once
-  /// per pose and pixels when needed (the candidate's check, the print turn's), never invalidated by hand.
-  struct PrintAtPose {
-    explicit PrintAtPose(RefineRun& of) : run(of) {}
-    RefineRun& run;
-    Pose measured;
-    int pixels = -1;  // pixels_version_ when measured (-1: never)
-    double z = 0;
-    double at(Renderer& renderer, const Pose& pose);
-    void set(const Pose& pose, double significance);
+  /// What finish()'s stages carry from one to the next: the result so far (its pose and loss, and what each
+  /// stage records in it) and the evidence measured at its pose. The print's significance is measured once per
+  /// pose and per derivation of the object's pixels (pixels_version_), when a stage needs it: a stage that moves
+  /// the pose or derives the pixels leaves nothing stale behind.
+  class Candidate {
+   public:
+    Candidate(RefineRun& run, RefineResult result) : result(std::move(result)), run_(run) {}
+    RefineResult result;
+    /// PrintRegistration::significance() at result.pose (NaN: not measurable; print_significance()).
+    double print(Renderer& renderer);
+    /// The print's significance at result.pose, measured by the caller.
+    void set_print(double significance);
+
+   private:
+    RefineRun& run_;
+    Pose measured_;
+    int pixels_ = -1;  // pixels_version_ when measured (-1: never)
+    double z_ = 0;
   };
   /// The runs' bests as the result's, and the start's own basin (the runs from the starts) chosen.
-  RefineResult start_result();
+  Candidate start_candidate();
   /// After a coarse phase, and under newly derived pixels: the initial loss at the fine scale, and a start no run
   /// beat as the result.
-  void weigh_starts(Renderer& renderer, RefineResult& res);
+  void weigh_starts(Renderer& renderer, Candidate& c);
   /// The shape scan's best candidate replaces the start's basin when the evidence supports the jump.
-  void weigh_candidate(Renderer& renderer, RefineResult& res, PrintAtPose& print);
+  void weigh_candidate(Renderer& renderer, Candidate& c);
   /// Without a mask: the object's pixels derived once more, about the chosen result.
-  void derive_pixels_at_result(Renderer& renderer, RefineResult& res);
+  void derive_pixels_at_result(Renderer& renderer, Candidate& c);
   /// The print alignment's turn about print_axes_, kept when the loss and the print's registration allow it.
-  void align_result_print(Renderer& renderer, RefineResult& res, PrintAtPose& print);
+  void align_result_print(Renderer& renderer, Candidate& c);
   /// The print alignment then the Newton steps, again (kAlignmentPasses) when the steps went on far.
-  void align_print_and_step(Renderer& renderer, RefineResult& res, PrintAtPose& print);
+  void align_print_and_step(Renderer& renderer, Candidate& c);
   /// The shape-equivalent turn of the result (turns_) whose print registers best, if better than the result's,
   /// converged from; it replaces the result when its print registers clearly better there (kClearPrint), and
   /// is otherwise the result's rival (RefineResult::rival_print) when it stayed a pose of its own at a loss no
   /// higher. Only with a mask or depth.
-  void weigh_shape_turns(Renderer& renderer, RefineResult& res, PrintAtPose& print);
-  /// Mask IoU, depth inliers and print registration at the result, per view; returns the rendered pixels.
+  void weigh_shape_turns(Renderer& renderer, Candidate& c);
+  /// The render of view `v` at `pose` at the fine scale (counted).
+  RenderImage render_view(Renderer& renderer, size_t v, const Pose& pose);
+  /// Mask IoU and depth agreement of view `v`'s render `img` (no loss).
+  RefineResult::ViewScores view_scores(const RenderImage& img, size_t v) const;
+  /// One view's scores at the result: mask IoU, depth agreement and the print's registration. Returns the
+  /// rendered pixels.
+  int score_view(Renderer& renderer, RefineResult& res);
+  /// Several views' (refine_views()): each view's scores and loss (RefineResult::view_scores), the result's the
+  /// weakest view's. Returns the rendered pixels over all views.
   int score_views(Renderer& renderer, RefineResult& res);
+  /// The loss's curvature about the result (RefinerOptions::probe_distance; one view's, or the views' mean).
+  void probe_curvature(Renderer& renderer, RefineResult& res);
   /// Curvature, covariance, convergence, verdict and time of the result.
   void judge_result(Renderer& renderer, RefineResult& res, int rendered_pixels);
   int scan_at_ = -1;         // the iteration whose step is preceded by the scan (-1: none)

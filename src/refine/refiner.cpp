@@ -86,6 +86,8 @@ RefineResult keep_better(RefineResult first, RefineResult retry, double time_ms,
   RefineResult& kept = retry_replaces(first, retry, weigh_print) ? retry : first;
   kept.initial_loss = initial_loss;
   kept.evaluations = first.evaluations + retry.evaluations;
+  for (size_t stage = 0; stage < size_t(kRefineStages); ++stage)
+    kept.stage_evaluations[stage] = first.stage_evaluations[stage] + retry.stage_evaluations[stage];
   kept.retried = true;
   kept.time_ms = time_ms;
   return std::move(kept);
@@ -188,7 +190,7 @@ std::vector<Pose> Refiner::retry_starts(const RefinerOptions& o, const Mesh& mes
 
 namespace {
 
-using Progress = std::function<void(int iteration, int total, double best_loss)>;
+using Progress = Refiner::Progress;
 
 /// The frame at the refiner's scales, shared by single-view runs (refine_all); null: each run evaluates its own
 /// images (refine_views()).
@@ -443,7 +445,9 @@ std::vector<RefineResult> Refiner::refine_pass(const RefinerOptions& options, co
   return out;
 }
 
-long planned_evaluations(const RefinerOptions& o) {
+namespace {
+
+long descent_evaluations(const RefinerOptions& o) {
   long total = 0;
   int active = std::max(o.batch_size, 1), candidates = 0, halvings = 0;
   const int scan_at = scan_iteration(o);  // with as many turns as any shape gets
@@ -457,24 +461,57 @@ long planned_evaluations(const RefinerOptions& o) {
     }
     total += active + candidates;
   }
-  // finish(): the initial loss at the fine scale, a candidate's print registration (two renders), the polish,
-  // the print alignment (one axis, and the loss and registration at its turn), the Newton steps (a render for
-  // the pixel count, then per round a probe and three tries), both once more when the steps moved far, the
-  // result's shape-equivalent turns weighed by the print (a registration each, then the same stages from the one
-  // it prefers), the scoring render and the curvature probe.
-  const long candidate = scan_at >= 0 && scan_at < o.iterations ? 2 : 0;
-  const long print = o.explore_tolerance > 0 ? print_alignment_evaluations(o.print_search) + 2 : 0;
-  const long polish = o.polish_iterations > 0 && o.iterations > 0 ? 1 + long(o.polish_runs) * o.polish_iterations : 0;
-  const long newton = o.newton_rounds > 0 && o.iterations > 0 ? 1 + long(o.newton_rounds) * (kSecantProbePoses + 3) : 0;
-  const long passes = print > 0 && newton > 0 ? kAlignmentPasses : 1;
-  const long converge = polish + passes * (print + newton);
-  const long shape_turns = scan_at >= 0 && o.min_print_significance > 0 ? kMaxShapeTurns + 2 + converge : 0;
-  // Without a mask (derive_mask): the renders the object's pixels are derived about (the starts, at most one per
-  // run; the better half of the runs; the result), and the result's and the starts' losses under the last ones.
   const long batch = std::max(o.batch_size, 1);
-  const long derive = o.derive_mask ? batch + (batch + 1) / 2 + 2 + batch : 0;
-  return total + 2 + candidate + converge + shape_turns + derive +
-         (o.probe_distance > 0 ? kCurvatureProbeEvaluations : 0);
+  return total + (o.derive_mask ? batch + (batch + 1) / 2 : 0);
+}
+
+bool scans(const RefinerOptions& o) {
+  const int scan_at = scan_iteration(o);
+  return scan_at >= 0 && scan_at < o.iterations;
+}
+
+// The polish, then the print alignment and the Newton steps (both again when the steps moved far).
+long converge_evaluations(const RefinerOptions& o) {
+  return planned_evaluations(o, RefineStage::kPolish) + planned_evaluations(o, RefineStage::kAlignPrintAndStep);
+}
+
+}  // namespace
+
+long planned_evaluations(const RefinerOptions& o, RefineStage stage) {
+  switch (stage) {
+    case RefineStage::kDescent:
+      return descent_evaluations(o);
+    case RefineStage::kWeighStarts:
+      return 1;
+    case RefineStage::kWeighCandidate:
+      return scans(o) ? 2 : 0;
+    case RefineStage::kDerivePixels:
+      return o.derive_mask ? 2 + std::max(o.batch_size, 1) : 0;
+    case RefineStage::kPolish:
+      return o.polish_iterations > 0 && o.iterations > 0 ? 1 + long(o.polish_runs) * o.polish_iterations : 0;
+    case RefineStage::kAlignPrintAndStep: {
+      // The alignment about one axis, then the loss and the registration at its turn; the Newton steps' render for
+      // the pixel count, then per round a probe and three tries.
+      const long print = o.explore_tolerance > 0 ? print_alignment_evaluations(o.print_search) + 2 : 0;
+      const long newton =
+          o.newton_rounds > 0 && o.iterations > 0 ? 1 + long(o.newton_rounds) * (kSecantProbePoses + 3) : 0;
+      return (print > 0 && newton > 0 ? kAlignmentPasses : 1) * (print + newton);
+    }
+    case RefineStage::kWeighShapeTurns:
+      // (with or without the scan: a single iteration has none, and the result's turns are weighed all the same)
+      return o.explore_tolerance > 0 && o.min_print_significance > 0
+                 ? kMaxShapeTurns + 2 + converge_evaluations(o)
+                 : 0;
+    case RefineStage::kScore:
+      return 1 + (o.probe_distance > 0 ? kCurvatureProbeEvaluations : 0);
+  }
+  return 0;
+}
+
+long planned_evaluations(const RefinerOptions& o) {
+  long total = 0;
+  for (int stage = 0; stage < kRefineStages; ++stage) total += planned_evaluations(o, RefineStage(stage));
+  return total;
 }
 
 }  // namespace diffdope

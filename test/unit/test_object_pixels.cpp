@@ -11,6 +11,7 @@
 #include "diffdope/procedural.hpp"
 #include "diffdope/refiner.hpp"
 #include "diffdope/synthetic.hpp"
+#include "test_scenes.hpp"
 
 using namespace diffdope;
 
@@ -157,6 +158,8 @@ TEST(ObjectPixels, WithoutAMaskGoodStartsStayWithinTwoMillimetres) {
     const Pose start = perturb_pose(s.truth, s.object.center(), M_PI / 180, 0.001, rng);
     const RefineResult r = Refiner(test_options()).refine(s.cam, s.obs, s.object, start);
     EXPECT_LT(1e3 * add_error(points, r.pose, s.truth), 2.0) << "start " << k;
+    test::expect_within_plan(r, test_options(), "start " + std::to_string(k));
+    EXPECT_GT(r.stage_evaluations[size_t(RefineStage::kDerivePixels)], 0) << "start " << k;
     EXPECT_TRUE(r.plausible) << "start " << k;
     EXPECT_GT(r.mask_iou, 0.8) << "start " << k;  // against the derived pixels
     Observation boxed = s.obs;

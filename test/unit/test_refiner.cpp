@@ -11,6 +11,7 @@
 #include "diffdope/print_alignment.hpp"
 #include "diffdope/refiner.hpp"
 #include "diffdope/synthetic.hpp"
+#include "test_scenes.hpp"
 
 using namespace diffdope;
 
@@ -138,6 +139,8 @@ TEST(Refiner, SuccessiveHalvingDropsTheWorseHalfThreeTimes) {
   // same when refine_all() evaluates the runs in its joint calls.
   EXPECT_GE(r.evaluations, evaluated(r));
   EXPECT_LE(r.evaluations, planned_evaluations(o));
+  test::expect_within_plan(r, o, "halved");
+  EXPECT_EQ(r.stage_evaluations[size_t(RefineStage::kDescent)] + kCurvatureProbeEvaluations, evaluated(r));
   const ObjectTarget target{&s.mesh, init, s.obs.mask, {}, StartKind::kFresh};
   EXPECT_EQ(Refiner(o).refine_all(s.cam, s.obs, {target})[0].evaluations, r.evaluations);
   o.successive_halving = false;

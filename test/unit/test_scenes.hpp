@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <string>
 
 #include "diffdope/procedural.hpp"
 #include "diffdope/refiner.hpp"
@@ -21,6 +22,18 @@ inline RefinerOptions steps_only_options() {
   o.retry_turn = 0;
   o.polish_iterations = 0;
   return o;
+}
+
+/// A refinement's evaluations, stage by stage: each within what planned_evaluations() plans for its stage (one
+/// start), and together the result's count.
+inline void expect_within_plan(const RefineResult& r, const RefinerOptions& o, const std::string& what) {
+  long sum = 0;
+  for (int stage = 0; stage < kRefineStages; ++stage) {
+    EXPECT_LE(r.stage_evaluations[size_t(stage)], planned_evaluations(o, RefineStage(stage)))
+        << what << ": stage " << stage;
+    sum += r.stage_evaluations[size_t(stage)];
+  }
+  EXPECT_EQ(sum, r.evaluations) << what;
 }
 
 inline Camera test_camera() { return Camera(300.0, 300.0, 159.5, 119.5, 320, 240); }

@@ -141,7 +141,8 @@ TEST(Refiner, ThePrintIsAlignedAgainOnceTheNewtonStepsHaveConverged) {
   const RefineResult r = Refiner(o).refine(s.cam, s.obs, s.can, start);
   EXPECT_GE(r.newton_steps, 3);
   EXPECT_GT(degrees(r.print_turn), 10.0);
-  EXPECT_LE(r.evaluations, planned_evaluations(o));  // both alignments and both rounds of steps within the plan
+  test::expect_within_plan(r, o, "the can");  // both alignments and both rounds of steps within the plan
+  EXPECT_GT(r.stage_evaluations[size_t(RefineStage::kAlignPrintAndStep)], 0);
   EXPECT_LT(angle_between(r.pose.R, s.truth.R), 1.5);
   EXPECT_LT((r.pose.t - s.truth.t).norm(), 0.002);
 }
@@ -438,6 +439,8 @@ TEST(Refiner, AResultOnABoxsBackFaceIsTurnedToTheFaceThePrintShows) {
   // The back face it left is its rival, which the print clearly does not prefer.
   ASSERT_TRUE(std::isfinite(turned.rival_print));
   EXPECT_LT(turned.rival_print + kClearPrint, turned.print.significance());
+  test::expect_within_plan(turned, o, "turned");
+  EXPECT_GT(turned.stage_evaluations[size_t(RefineStage::kWeighShapeTurns)], kMaxShapeTurns / 2);
   o.min_print_significance = 0;
   const RefineResult kept = Refiner(o).refine(cam, obs, box, back);
   EXPECT_GT(angle_between(kept.pose.R, truth.R), 170.0);
