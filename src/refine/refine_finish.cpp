@@ -311,9 +311,9 @@ void RefineRun::align_result_print(Renderer& renderer, Candidate& c) {
   // freedom: with RGB alone that loss is the print comparison itself, and a turn that moves the handle (unseen
   // without a mask) to where the print fits slightly better would be taken 30-40 degrees from the truth.
   const Observation& obs0 = fine_[0].obs;
-  if (meshes_.size() != 1 || !std::isfinite(res.loss.total) || !obs0.has_texture() ||
+  if (meshes_.size() != 1 || options_.iterations == 0 || !std::isfinite(res.loss.total) || !obs0.has_texture() ||
       !(has_mask_ || obs0.has_depth()))
-    return;
+    return;  // (0 iterations: score the start)
   LossOptions with_print = loss_;
   with_print.weight_texture = 1.0;
   const PrintEvaluator evaluate_print = [&](const std::vector<Pose>& poses, std::vector<LossValue>& out) {
@@ -351,7 +351,9 @@ void RefineRun::weigh_shape_turns(Renderer& renderer, Candidate& c) {
   // they hold the other degrees of freedom while it converges from the turn (with RGB alone the colour term would
   // be the print comparison itself, as for the print alignment).
   const bool held = has_mask_ || fine_[0].obs.has_depth();
-  if (turns_.empty() || !held || !(options_.min_print_significance > 0) || !std::isfinite(res.loss.total)) return;
+  if (turns_.empty() || !held || !(options_.min_print_significance > 0) || options_.iterations == 0 ||
+      !std::isfinite(res.loss.total))
+    return;  // (0 iterations: score the start)
   const double z = c.print(renderer);
   if (!std::isfinite(z)) return;
   int best = -1;

@@ -492,14 +492,15 @@ long planned_evaluations(const RefinerOptions& o, RefineStage stage) {
     case RefineStage::kAlignPrintAndStep: {
       // The alignment about one axis, then the loss and the registration at its turn; the Newton steps' render for
       // the pixel count, then per round a probe and three tries.
-      const long print = o.explore_tolerance > 0 ? print_alignment_evaluations(o.print_search) + 2 : 0;
+      const long print =
+          o.explore_tolerance > 0 && o.iterations > 0 ? print_alignment_evaluations(o.print_search) + 2 : 0;
       const long newton =
           o.newton_rounds > 0 && o.iterations > 0 ? 1 + long(o.newton_rounds) * (kSecantProbePoses + 3) : 0;
       return (print > 0 && newton > 0 ? kAlignmentPasses : 1) * (print + newton);
     }
     case RefineStage::kWeighShapeTurns:
       // (with or without the scan: a single iteration has none, and the result's turns are weighed all the same)
-      return o.explore_tolerance > 0 && o.min_print_significance > 0
+      return o.explore_tolerance > 0 && o.min_print_significance > 0 && o.iterations > 0
                  ? kMaxShapeTurns + 2 + converge_evaluations(o)
                  : 0;
     case RefineStage::kScore:

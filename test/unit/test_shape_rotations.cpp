@@ -441,6 +441,13 @@ TEST(Refiner, AResultOnABoxsBackFaceIsTurnedToTheFaceThePrintShows) {
   EXPECT_LT(turned.rival_print + kClearPrint, turned.print.significance());
   test::expect_within_plan(turned, o, "turned");
   EXPECT_GT(turned.stage_evaluations[size_t(RefineStage::kWeighShapeTurns)], kMaxShapeTurns / 2);
+  // Scoring the start (no iteration) leaves it as it was: no turn is weighed, nothing is aligned.
+  RefinerOptions scored = o;
+  scored.iterations = 0;
+  const RefineResult start = Refiner(scored).refine(cam, obs, box, back);
+  EXPECT_EQ(start.pose.R, back.R);
+  EXPECT_EQ(start.pose.t, back.t);
+  test::expect_within_plan(start, scored, "scored");
   o.min_print_significance = 0;
   const RefineResult kept = Refiner(o).refine(cam, obs, box, back);
   EXPECT_GT(angle_between(kept.pose.R, truth.R), 170.0);
