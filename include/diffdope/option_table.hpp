@@ -128,6 +128,13 @@ const std::vector<OptionSpec<LossOptions>>& loss_option_table();
 const std::vector<OptionSpec<RenderOptions>>& render_option_table();
 /// RefinerOptions' own rows, then "loss.*" and "render.*" (config/default.yaml's order).
 const std::vector<OptionSpec<RefinerOptions>>& refiner_option_table();
+/// Deprecated names of refiner_option_table() keys, as (deprecated, current): still read as the current key
+/// (a config that gives both is refused), with a note naming the current one.
+struct RenamedOption {
+  const char* deprecated;
+  const char* current;
+};
+const std::vector<RenamedOption>& renamed_refiner_options();
 /// TrackOptions' rows, named as the node's parameters.
 const std::vector<OptionSpec<TrackOptions>>& track_option_table();
 

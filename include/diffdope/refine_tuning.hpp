@@ -24,7 +24,7 @@ constexpr int kShapeAngleSteps = 12;
 /// (planned_evaluations() counts it).
 constexpr int kMaxShapeTurns = 15;
 /// Surface samples of the shape analysis (per sample set): enough for a discrepancy of a few thousandths of the
-/// diameter, the scale explore_tolerance is given in.
+/// diameter, the scale shape_tolerance is given in.
 constexpr int kShapeSamples = 1024;
 /// Reweighting rounds of the fit of an axis of revolution: the inlier set settles within a few.
 constexpr int kRevolutionFitRounds = 12;

@@ -52,27 +52,34 @@ struct RefinerOptions {
   /// polishes. At 0.75 the fine phase is the last quarter, where successive halving has left B / 8 runs.
   double coarse_fraction = 0.75;  // in [0, 1)
   double coarse_scale = 0.5;     // in [0.05, 1]; image_scale * coarse_scale >= kMinImageScale
-  /// Hard starts on (nearly) symmetric shapes (shape_rotations.hpp): rotations about the surface's principal
-  /// axes that move the surface by at most this fraction of its diameter (a bottle about its axis: every 30
-  /// degrees; a box: its half turns) give poses that silhouette and depth cannot tell apart, and gradient
-  /// descent does not cross between them (a print's basin is a few pixels wide). When the fine phase begins
-  /// (silhouette and depth have done their work), every run is evaluated turned by each of them (a scan: forward
-  /// renders only, no step); of the turns whose loss is more than 1 % below some run's own, the lowest becomes a
-  /// candidate run beside the others, which go on unturned. Once converged, the candidate replaces the start's
-  /// basin only when the evidence is clear for how far it jumps (jump_is_supported() in refine_run.hpp: a lower
-  /// loss, the print's registration not falling, and either clearly better print or a loss lower by a margin
-  /// that grows with the angle). 0 = off (the paper's algorithm).
-  double explore_tolerance = 0.01;  // [0, 0.2]
+  /// Near symmetries of the shape (shape_rotations.hpp): rotations about the surface's principal axes that move
+  /// it by at most this share of its diameter (a bottle about its axis: every 30 degrees; a box: its half turns)
+  /// give poses that silhouette and depth cannot tell apart, and gradient descent does not cross between them (a
+  /// print's basin is a few pixels wide). They are the turns the shape scan tries (shape_scan) and the result's
+  /// print is weighed at (min_print_significance), and their axes of near revolution are the ones the print
+  /// alignment turns about (print_search). 0 = no turn counts as ambiguous, so none of these runs (the paper's
+  /// algorithm). Its deprecated name explore_tolerance is still read (YAML and the node's ~parameters).
+  double shape_tolerance = 0.01;  // [0, 0.2]
+  /// Shape scan: when the fine phase begins (silhouette and depth have done their work), every run is evaluated
+  /// turned by each of the shape's near symmetries (shape_tolerance; forward renders only, no step); of the turns
+  /// whose loss is more than 1 % below some run's own, the lowest becomes a candidate run beside the others, which
+  /// go on unturned. Once converged, the candidate replaces the start's basin only when the evidence is clear for
+  /// how far it jumps (jump_is_supported() in refine_run.hpp: a lower loss, the print's registration not
+  /// falling, and either clearly better print or a loss lower by a margin that grows with the angle). false =
+  /// off (the print alignment and the result's shape turns still run: shape_tolerance 0 turns all off); never
+  /// for tracked starts.
+  bool shape_scan = true;
   /// Weight of the texture term (loss.weight_texture) added to the loss the scan compares turns with. Off by
   /// default: it settles ties on easy starts but misjudges hard ones, whose print is still a few pixels off
-  /// when the scan comes (docs/benchmarks.md).
-  double explore_texture_weight = 0.0;  // [0, LossOptions::kMaxWeight]
+  /// when the scan comes (docs/benchmarks.md). Its deprecated name explore_texture_weight is still read.
+  double scan_texture_weight = 0.0;  // [0, LossOptions::kMaxWeight]
   /// Print alignment (print_alignment.hpp): after the descent, the result is turned about each axis of near
-  /// revolution of its shape (within explore_tolerance: a bottle's axis, or a mug's body axis, which the handle
+  /// revolution of its shape (within shape_tolerance: a bottle's axis, or a mug's body axis, which the handle
   /// hides from silhouette and depth whenever it is out of sight; declared symmetries excluded) by up to
   /// +-print_search radians, and the turn where the print agrees best with the image is kept. Radians; 0 = off
-  /// (the paper's algorithm), as is explore_tolerance = 0. Needs rgb and a mask or depth (they hold the other
-  /// degrees of freedom while the print decides the turn); skipped with RGB alone.
+  /// (the paper's algorithm), as is shape_tolerance = 0. Needs rgb and a mask or depth (they hold the other
+  /// degrees of freedom while the print decides the turn); skipped with RGB alone, and with iterations 0 (scoring
+  /// the start).
   double print_search = 0.7;  // [0, pi]
   /// Retry of a rejected result: when the verdict finds a refined pose implausible (RefineResult::plausible
   /// false, no error), the object is refined again from its initial pose(s) and from each turned by
@@ -222,7 +229,7 @@ struct RefineResult {
   int winner = -1;                    // the run whose best pose is the result (its start's run when no run's
                                       // fine-phase best beat the start itself)
   int start = 0;                      // index of the initial pose the winning run started from
-  int scan_turns = 0;                 // candidates the shape scan (explore_tolerance) added: runs from turned poses
+  int scan_turns = 0;                 // candidates the shape scan (shape_scan) added: runs from turned poses
   bool scan_taken = false;            // the result is such a candidate, not the start's own basin (the evidence
                                       // was clear: jump_is_supported() in src/refine/refine_run.hpp)
   double shape_turn = 0;              // radians of the shape-equivalent turn the print preferred at the end (0: none)
@@ -299,7 +306,7 @@ std::string undetermined_reason(const RefineResult& r);
 bool retry_replaces(const RefineResult& first, const RefineResult& retry, bool weigh_print);
 
 /// Where an object's starts come from. kFresh: a detection, or a caller's pose: the full refinement. kTracked: a
-/// live track (its last refined pose and its prediction): no shape scan (explore_tolerance), retry (retry_turn)
+/// live track (its last refined pose and its prediction): no shape scan (shape_scan), retry (retry_turn)
 /// nor polish, and the print alignment searches only +-kTrackedPrintSearch (print_alignment.hpp). A live track is
 /// right or nearly so; a scan could only flip it between frames on a weakly printed object.
 enum class StartKind { kFresh, kTracked };
@@ -394,7 +401,8 @@ class Refiner {
  private:
   /// `o`, validated and checked against the renderer's device and render options.
   const RefinerOptions& checked(const RefinerOptions& o) const;
-  /// The model-frame turns the shape scan tries for `mesh` (none when not exploring).
+  /// The model-frame turns of `mesh`'s near symmetries (RefinerOptions::shape_tolerance): what the shape scan
+  /// tries and the result's print is weighed at; none for a tracked start or at shape_tolerance 0.
   std::vector<Pose> shape_turns(const RefinerOptions& o, const Mesh& mesh, StartKind kind);
   /// The axes the print alignment turns `mesh` about (RefinerOptions::print_search; none when it is off).
   std::vector<ShapeRotation> print_axes(const RefinerOptions& o, const Mesh& mesh);
@@ -434,10 +442,10 @@ long planned_evaluations(const RefinerOptions& o);
 ///     candidate and at the start's basin;
 ///   - kDerivePixels (derive_mask): the render the pixels are derived about at the result, and the result's and
 ///     the starts' losses under them;
-///   - kPolish; kAlignPrintAndStep: the print alignment and the Newton steps, each twice (they run again when the
-///     steps move far);
-///   - kWeighShapeTurns: a registration per shape turn, then the loss, polish, alignment and steps from the one
-///     the print prefers;
+///   - kPolish; kAlignPrintAndStep: the print alignment about one axis (a shape with several axes of near
+///     revolution costs more) and the Newton steps, each twice (they run again when the steps move far);
+///   - kWeighShapeTurns: a registration at the result and per shape turn, then the loss, polish, alignment and
+///     steps from the one the print prefers, and its registration;
 ///   - kScore: the scoring render and the curvature probe.
 long planned_evaluations(const RefinerOptions& o, RefineStage stage);
 

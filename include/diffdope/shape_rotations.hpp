@@ -3,7 +3,7 @@
 // half turn, a cylinder flipped end over end. Silhouette and depth see the same object after them; only texture
 // (or nothing, for a true symmetry) decides. A hard start is often closer to one of them than to the truth, and
 // gradient descent does not cross from one to the other (the texture's basin is narrow), so the refiner tries
-// them all on each run (RefinerOptions::explore_tolerance) and lets the loss decide.
+// them all on each run (RefinerOptions::shape_scan) and lets the loss decide.
 #include <Eigen/Core>
 #include <optional>
 #include <vector>

@@ -26,7 +26,7 @@ double millimetres_or_unknown(double metres) { return metres < 0 ? -1.0 : 1e3 * 
 RefinerOptions CalibrationOptions::default_refiner() {
   RefinerOptions o;
   o.loss.weight_rgb = 0;
-  o.explore_tolerance = 0;
+  o.shape_tolerance = 0;
   o.iterations = 200;
   o.newton_rounds = 0;  // the 200 iterations and the later passes' small rates converge
   o.derive_mask = false;  // the calibrator derives the robot's pixels itself (derive_mask()), per capture

@@ -180,7 +180,7 @@ void RefineRun::set_up_loss(const std::vector<RefineView>& views) {
   if (!any_depth) res_.loss_used.weight_depth = 0;
   if (!any_rgb) res_.loss_used.weight_rgb = res_.loss_used.weight_edges = res_.loss_used.weight_texture = 0;
   scan_loss_ = loss_;
-  scan_loss_.weight_texture += o.explore_texture_weight;
+  scan_loss_.weight_texture += o.scan_texture_weight;
 }
 
 void RefineRun::start_runs() {

@@ -44,7 +44,7 @@ class RefineRun {
   /// the pose (Refiner::refine_views()). `scaled_frame` (refine_all, one view): the frame's rgb / depth / edges
   /// already at the refiner's scale, shared by the objects; then only the mask is resized. `coarse_frame`
   /// likewise at image_scale * coarse_scale (see RefinerOptions::coarse_fraction). `shape_turns`: the
-  /// model-frame turns the shape scan tries on every run (RefinerOptions::explore_tolerance; empty: no scan).
+  /// model-frame turns the shape scan tries on every run (RefinerOptions::shape_tolerance; empty: none).
   /// `pivot_model`: the model point the steps turn about (null: the first view's mesh centre).
   RefineRun(const RefinerOptions& options, const std::vector<RefineView>& views, const std::vector<Pose>& initials,
             std::vector<Pose> shape_turns = {}, const Observation* scaled_frame = nullptr,
@@ -68,7 +68,7 @@ class RefineRun {
   /// One iteration's evaluation: what the driver renders and scores, and what absorb() takes back with the values.
   struct Step {
     std::vector<Pose> poses;  // the active runs' poses; in the shape scan, each run turned by every shape turn
-    LossOptions loss;         // the scan's adds the texture term (RefinerOptions::explore_texture_weight)
+    LossOptions loss;         // the scan's adds the texture term (RefinerOptions::scan_texture_weight)
     bool with_gradient = true;  // not on the last iteration nor in the scan
     bool scan = false;
     const Camera* camera = nullptr;  // this iteration's scale (coarse, then fine); view 0
@@ -152,8 +152,9 @@ class RefineRun {
   int k_ = 0, stale_ = 0;
   int steps_ = 0;  // iterations stepped (k_ jumps when the coarse phase stalls)
   int halvings_ = 0;  // successive halvings done (of three)
-  // The shape scan (RefinerOptions::explore_tolerance): once, when the fine phase begins (kScanMargin).
-  std::vector<Pose> turns_;  // model-frame turns tried on every run
+  // The shape's near symmetries (RefinerOptions::shape_tolerance): the turns the shape scan tries on every run
+  // (RefinerOptions::shape_scan: once, when the fine phase begins; kScanMargin) and the result's print is weighed at.
+  std::vector<Pose> turns_;
   std::vector<ShapeRotation> print_axes_;
   double print_range_ = 0;
   int polish_iterations_ = 0;

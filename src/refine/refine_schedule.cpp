@@ -17,7 +17,7 @@ int coarse_iterations(const RefinerOptions& o) {
 }
 
 int scan_iteration(const RefinerOptions& o) {
-  if (!(o.explore_tolerance > 0)) return -1;
+  if (!o.shape_scan || !(o.shape_tolerance > 0)) return -1;
   const int switch_at = coarse_iterations(o);
   return switch_at > 0 ? switch_at : (o.iterations >= 2 ? o.iterations / 2 : -1);
 }
@@ -30,7 +30,8 @@ int halvings_due(int k, int iters) {
 
 bool uses_texture(const RefinerOptions& o, Phase phase) {
   if (o.loss.weight_texture > 0) return true;
-  return phase == Phase::kFine && o.explore_tolerance > 0 && (o.explore_texture_weight > 0 || o.print_search > 0);
+  const bool scan_compares_print = scan_iteration(o) >= 0 && o.scan_texture_weight > 0;
+  return phase == Phase::kFine && o.shape_tolerance > 0 && (scan_compares_print || o.print_search > 0);
 }
 
 Observation scale_frame(const Camera& camera, const Observation& frame, const RefinerOptions& o, double scale,

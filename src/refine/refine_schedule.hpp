@@ -19,7 +19,7 @@ double milliseconds_since(std::chrono::steady_clock::time_point start);
 /// At least one fine step always follows (the last iteration only evaluates).
 int coarse_iterations(const RefinerOptions& o);
 
-/// The iteration whose batch is preceded by the shape scan (RefinerOptions::explore_tolerance): when the fine
+/// The iteration whose batch is preceded by the shape scan (RefinerOptions::shape_scan): when the fine
 /// phase begins (without a coarse phase: half-way), never on the last iteration; -1 = none.
 int scan_iteration(const RefinerOptions& o);
 

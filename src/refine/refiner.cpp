@@ -327,28 +327,28 @@ const std::vector<ShapeRotation>& Refiner::shape_rotations(const Mesh& mesh) {
 
 bool Refiner::is_declared_turn(const RefinerOptions& o, const Mesh& mesh, const Pose& turn) const {
   const double radius = 0.5 * mesh.diameter();
-  return mesh.symmetry.contains(turn, kDeclaredTurnAngle, o.explore_tolerance * mesh.diameter(), radius);
+  return mesh.symmetry.contains(turn, kDeclaredTurnAngle, o.shape_tolerance * mesh.diameter(), radius);
 }
 
 std::vector<Pose> Refiner::shape_turns(const RefinerOptions& o, const Mesh& mesh, StartKind kind) {
-  if (kind != StartKind::kFresh || !(o.explore_tolerance > 0) || mesh.content_id() == 0) return {};
+  if (kind != StartKind::kFresh || !(o.shape_tolerance > 0) || mesh.content_id() == 0) return {};
   std::vector<Pose> turns;
   // A declared symmetry's turns look the same by design: no loss can choose among them.
-  for (const ShapeRotation& r : ambiguous_rotations(shape_rotations(mesh), o.explore_tolerance, kMaxShapeTurns))
+  for (const ShapeRotation& r : ambiguous_rotations(shape_rotations(mesh), o.shape_tolerance, kMaxShapeTurns))
     if (!is_declared_turn(o, mesh, r.as_pose())) turns.push_back(r.as_pose());
   return turns;
 }
 
 std::vector<ShapeRotation> Refiner::print_axes(const RefinerOptions& o, const Mesh& mesh) {
-  if (!(o.print_search > 0) || !(o.explore_tolerance > 0) || mesh.content_id() == 0) return {};
-  std::vector<ShapeRotation> candidates = revolution_axes(shape_rotations(mesh), o.explore_tolerance);
+  if (!(o.print_search > 0) || !(o.shape_tolerance > 0) || mesh.content_id() == 0) return {};
+  std::vector<ShapeRotation> candidates = revolution_axes(shape_rotations(mesh), o.shape_tolerance);
   // The axis of revolution of most of the surface (a mug's body: no principal axis when a handle tilts them),
   // unless a principal one is already that axis.
-  const auto key = std::make_pair(mesh.content_id(), o.explore_tolerance);
+  const auto key = std::make_pair(mesh.content_id(), o.shape_tolerance);
   auto fitted = revolution_fits_.find(key);
   if (fitted == revolution_fits_.end()) {
     if (revolution_fits_.size() >= kMaxCachedMeshes) revolution_fits_.clear();
-    fitted = revolution_fits_.emplace(key, fit_revolution_axis(mesh, o.explore_tolerance)).first;
+    fitted = revolution_fits_.emplace(key, fit_revolution_axis(mesh, o.shape_tolerance)).first;
   }
   // Several principal axes of revolution (a ball): every direction is one; the fit adds nothing.
   if (fitted->second && candidates.size() < 2) {
@@ -490,18 +490,21 @@ long planned_evaluations(const RefinerOptions& o, RefineStage stage) {
     case RefineStage::kPolish:
       return o.polish_iterations > 0 && o.iterations > 0 ? 1 + long(o.polish_runs) * o.polish_iterations : 0;
     case RefineStage::kAlignPrintAndStep: {
-      // The alignment about one axis, then the loss and the registration at its turn; the Newton steps' render for
-      // the pixel count, then per round a probe and three tries.
+      // The alignment about one axis, then the loss and the registration at its turn, and the registration at the
+      // result when not measured yet; the Newton steps' render for the pixel count, then per round a probe and
+      // three tries.
       const long print =
-          o.explore_tolerance > 0 && o.iterations > 0 ? print_alignment_evaluations(o.print_search) + 2 : 0;
+          o.shape_tolerance > 0 && o.iterations > 0 ? print_alignment_evaluations(o.print_search) + 3 : 0;
       const long newton =
           o.newton_rounds > 0 && o.iterations > 0 ? 1 + long(o.newton_rounds) * (kSecantProbePoses + 3) : 0;
       return (print > 0 && newton > 0 ? kAlignmentPasses : 1) * (print + newton);
     }
     case RefineStage::kWeighShapeTurns:
-      // (with or without the scan: a single iteration has none, and the result's turns are weighed all the same)
-      return o.explore_tolerance > 0 && o.min_print_significance > 0 && o.iterations > 0
-                 ? kMaxShapeTurns + 2 + converge_evaluations(o)
+      // The registration at the result and at each turn, the loss at the one it prefers, the convergence from there
+      // and the registration where it ends. With or without the scan (a single iteration has none, and the turns
+      // are weighed all the same).
+      return o.shape_tolerance > 0 && o.min_print_significance > 0 && o.iterations > 0
+                 ? kMaxShapeTurns + 3 + converge_evaluations(o)
                  : 0;
     case RefineStage::kScore:
       return 1 + (o.probe_distance > 0 ? kCurvatureProbeEvaluations : 0);

@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <iostream>
 #include <map>
 #include <set>
 #include <sstream>
@@ -60,9 +61,25 @@ void read_row(const YAML::Node& node, const OptionSpec<RefinerOptions>& row, Ref
   }
 }
 
-RefinerOptions parse(const YAML::Node& root, RefinerOptions o, const std::string& origin) {
-  if (!root || root.IsNull()) return o;
-  if (!root.IsMap()) throw std::runtime_error(origin + ": expected a mapping of option names to values");
+/// `given` with each deprecated key (renamed_refiner_options()) read as its current one, with a note on stderr.
+YAML::Node with_current_names(const YAML::Node& given, const std::string& origin) {
+  YAML::Node root = YAML::Clone(given);
+  for (const RenamedOption& r : renamed_refiner_options()) {
+    if (!root[r.deprecated]) continue;
+    if (root[r.current])
+      throw std::runtime_error(origin + ": " + r.deprecated + " is the deprecated name of " + r.current +
+                               "; give only " + r.current);
+    std::cerr << origin << ": " << r.deprecated << " is deprecated, read as " << r.current << "\n";
+    root[r.current] = root[r.deprecated];
+    root.remove(r.deprecated);
+  }
+  return root;
+}
+
+RefinerOptions parse(const YAML::Node& given, RefinerOptions o, const std::string& origin) {
+  if (!given || given.IsNull()) return o;
+  if (!given.IsMap()) throw std::runtime_error(origin + ": expected a mapping of option names to values");
+  const YAML::Node root = with_current_names(given, origin);
   std::set<std::string> used;
   std::map<std::string, std::set<std::string>> section_used;
   try {
@@ -159,6 +176,12 @@ void append_rows(std::vector<OptionSpec<RefinerOptions>>& r) {
 
 }  // namespace
 
+const std::vector<RenamedOption>& renamed_refiner_options() {
+  static const std::vector<RenamedOption> renamed = {{"explore_tolerance", "shape_tolerance"},
+                                                     {"explore_texture_weight", "scan_texture_weight"}};
+  return renamed;
+}
+
 const std::vector<OptionSpec<RefinerOptions>>& refiner_option_table() {
   using O = RefinerOptions;
   static const std::vector<OptionSpec<O>> rows = [] {
@@ -174,9 +197,12 @@ const std::vector<OptionSpec<RefinerOptions>>& refiner_option_table() {
                    "share of the iterations on images resized by a further coarse_scale (0: the paper's single scale)",
                    false, true),
         option_row("coarse_scale", &O::coarse_scale, 0.05, 1, "", "the coarse phase's further resize factor"),
-        option_row("explore_tolerance", &O::explore_tolerance, 0, 0.2, " (0: off)",
-                   "shape scan: turns moving the surface less than this share of its diameter are tried as candidates"),
-        option_row("explore_texture_weight", &O::explore_texture_weight, 0, LossOptions::kMaxWeight, "",
+        option_row("shape_tolerance", &O::shape_tolerance, 0, 0.2, " (0: none)",
+                   "turns moving the surface less than this share of its diameter are the shape's near symmetries: "
+                   "scanned, weighed by the print, their axes aligned"),
+        option_row("shape_scan", &O::shape_scan, 0, 0, "",
+                   "true: when the fine phase begins, every run is tried turned by each near symmetry"),
+        option_row("scan_texture_weight", &O::scan_texture_weight, 0, LossOptions::kMaxWeight, "",
                    "texture term added to the shape scan's comparison"),
         option_row("print_search", &O::print_search, 0, M_PI, " radians (0: off)",
                    "print alignment: turn about an axis of near revolution to where the print fits best"),

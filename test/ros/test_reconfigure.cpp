@@ -119,6 +119,7 @@ TEST(Reconfigure, ChangesTakeEffectAtTheNextFramesAndBadSetsAreReverted) {
   EXPECT_EQ(intValue(start, "batch_size"), 16);
   EXPECT_NEAR(doubleValue(start, "image_scale"), 0.45, 1e-9);
   EXPECT_NEAR(doubleValue(start, "max_extrapolation"), 1.5, 1e-9);  // a track option, read with the others
+  EXPECT_NEAR(doubleValue(start, "shape_tolerance"), 0.02, 1e-9);   // set by its deprecated name
   EXPECT_EQ(strValue(start, "mode"), "tracking");
   ASSERT_TRUE(waitForArrays(ros::WallTime(), 3, 60)) << "the refiner never streamed";
   // 40: the detection budget; 20: the tracking budget (~track_iterations) of frames on steady tracks.

@@ -19,7 +19,8 @@ RuntimeSettings someSettings() {
   s.refiner.lr_low = 0.002;
   s.refiner.lr_high = 0.02;
   s.refiner.early_stop_patience = 5;
-  s.refiner.explore_tolerance = 0.03;
+  s.refiner.shape_tolerance = 0.03;
+  s.refiner.shape_scan = false;
   s.refiner.print_search = 0.3;
   s.refiner.retry_turn = 0.4;
   s.refiner.loss.weight_rgb = 0.7;
@@ -57,7 +58,8 @@ TEST(RuntimeSettings, RoundTripKeepsEveryValue) {
   EXPECT_DOUBLE_EQ(back.refiner.lr_low, 0.002);
   EXPECT_DOUBLE_EQ(back.refiner.lr_high, 0.02);
   EXPECT_EQ(back.refiner.early_stop_patience, 5);
-  EXPECT_DOUBLE_EQ(back.refiner.explore_tolerance, 0.03);
+  EXPECT_DOUBLE_EQ(back.refiner.shape_tolerance, 0.03);
+  EXPECT_FALSE(back.refiner.shape_scan);
   EXPECT_DOUBLE_EQ(back.refiner.print_search, 0.3);
   EXPECT_DOUBLE_EQ(back.refiner.retry_turn, 0.4);
   EXPECT_DOUBLE_EQ(back.refiner.loss.weight_rgb, 0.7);

@@ -123,7 +123,7 @@ TEST(DepthAgreement, AnObjectFarFromANoisyCameraIsJudgedByItsNoise) {
   RefinerOptions o;
   o.batch_size = 4;
   o.iterations = 0;  // score the given pose itself: no scan, no retry, no print alignment, no Newton steps
-  o.explore_tolerance = 0;
+  o.shape_tolerance = 0;
   o.retry_turn = 0;
   o.print_search = 0;
   o.newton_rounds = 0;

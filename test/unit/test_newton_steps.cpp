@@ -80,7 +80,7 @@ TEST(NewtonSteps, GrowTheirReachAlongAValleyThatGoesOn) {
   // halved every round would end at least 12 mm from it.
   const BarScene s{SyntheticNoise()};
   RefinerOptions o = test::steps_only_options();
-  o.explore_tolerance = 0;
+  o.shape_tolerance = 0;
   o.print_search = 0;
   Vector6d roll = Vector6d::Zero();
   roll.tail<3>() = s.truth.R.col(0) * (4 * M_PI / 180);  // about the bar's length
@@ -162,7 +162,7 @@ TEST(SecantHessian, RecoversAQuadraticLossInWhitenedUnits) {
 }
 
 TEST(NewtonSteps, ConvergeTrackedStartsToo) {
-  // A tracked start (refine_all with explore false) on the tracking budget: its few plain steps leave the bar's
+  // A tracked start (refine_all, StartKind::kTracked) on the tracking budget: its few plain steps leave the bar's
   // soft directions short, and the Newton steps converge them, as they do for a detection.
   const BarScene s{SyntheticNoise()};
   const auto points = metric_points(s.mesh);

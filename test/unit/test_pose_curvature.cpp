@@ -76,7 +76,7 @@ TEST(PoseCovariance, GrowsAboutAPlainCylindersAxis) {
   o.batch_size = 4;
   o.iterations = 0;  // the truth itself
   o.image_scale = 1.0;
-  o.explore_tolerance = 0;
+  o.shape_tolerance = 0;
   const RefineResult r = Refiner(o).refine(cam, obs, can, truth);
   ASSERT_TRUE(r.curvature.valid);
   const Eigen::Vector3d axis = truth.R.col(2), across = truth.R.col(0);
@@ -105,7 +105,7 @@ TEST(PoseCovariance, ADepthOnlyRefinementKnowsLessOfItsTurnInTheImagePlane) {
   o.batch_size = 4;
   o.iterations = 0;
   o.image_scale = 1.0;
-  o.explore_tolerance = 0;
+  o.shape_tolerance = 0;
   const RefineResult a = Refiner(o).refine(cam, full, block, truth);
   const RefineResult b = Refiner(o).refine(cam, depth_only, block, truth);
   ASSERT_TRUE(a.curvature.valid);

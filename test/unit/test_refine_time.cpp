@@ -15,7 +15,7 @@ TEST(PlannedEvaluations, RunsTimesIterationsLessWhatHalvingDrops) {
   RefinerOptions o;
   o.batch_size = 16;
   o.iterations = 100;
-  o.explore_tolerance = 0;  // no shape scan
+  o.shape_tolerance = 0;  // no shape scan, print alignment nor shape turns
   o.successive_halving = false;
   o.probe_distance = 0;  // no curvature probe
   o.polish_iterations = 0;
@@ -37,11 +37,11 @@ TEST(PlannedEvaluations, RunsTimesIterationsLessWhatHalvingDrops) {
   EXPECT_EQ(planned_evaluations(o), 16 * 25 + 8 * 25 + 4 * 25 + 2 * 25 + 2 + 2 + 1 + 2 * (kSecantProbePoses + 3));
   // With the shape scan, and so the print alignment: when the steps move far, the alignment and the steps run
   // once more; and all that again from the shape turn the print prefers at the result.
-  o.explore_tolerance = 0.01;
+  o.shape_tolerance = 0.01;
   o.newton_rounds = 0;
   const long without = planned_evaluations(o);
   o.newton_rounds = 2;
-  const long newton = 1 + 2 * (kSecantProbePoses + 3), print = print_alignment_evaluations(o.print_search) + 2;
+  const long newton = 1 + 2 * (kSecantProbePoses + 3), print = print_alignment_evaluations(o.print_search) + 3;
   EXPECT_EQ(planned_evaluations(o) - without, 2 * (2 * newton + print));
   // Without a mask: the renders the pixels are derived about (the starts, at most one per run; the better half;
   // the result), and the result's and the starts' losses under the last pixels.

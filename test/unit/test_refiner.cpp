@@ -117,7 +117,7 @@ TEST(Refiner, SuccessiveHalvingDropsTheWorseHalfThreeTimes) {
   RefinerOptions o = test_options();
   o.iterations = 20;
   o.coarse_fraction = 0;
-  o.explore_tolerance = 0;  // (the L-block has no shape turns anyway; planned_evaluations would count them)
+  o.shape_tolerance = 0;  // (the L-block has no shape turns anyway; planned_evaluations would count them)
   o.polish_iterations = 0;  // (run_histories do not hold the polish's nor the Newton steps'; counted below)
   o.newton_rounds = 0;
   o.derive_mask = false;  // (the scene has a mask: nothing is derived; planned_evaluations would count it)
@@ -152,14 +152,14 @@ TEST(Refiner, SuccessiveHalvingDropsTheWorseHalfThreeTimes) {
   EXPECT_EQ(evaluated(Refiner(o).refine(s.cam, s.obs, s.mesh, init)) + 2, planned_evaluations(o));
   // With the shape scan at k = 10 of 20: the 4 runs active then, each with itself and up to kMaxShapeTurns
   // turns, and a candidate run to the end (11 iterations); the candidate's and the basin's print
-  // registrations; the print alignment's, about one axis, and the loss and registration at its turn; at the
-  // result, a registration per shape turn, the loss and registration of the one the print prefers, and its
-  // print alignment.
+  // registrations; the print alignment's, about one axis, the loss and registration at its turn and the
+  // registration at the result; at the result, a registration there and per shape turn, the loss and
+  // registration of the one the print prefers, and its print alignment.
   RefinerOptions scan = o;
-  scan.explore_tolerance = 0.01;
-  const long print = print_alignment_evaluations(scan.print_search) + 2;
+  scan.shape_tolerance = 0.01;
+  const long print = print_alignment_evaluations(scan.print_search) + 3;
   EXPECT_EQ(planned_evaluations(scan),
-            planned_evaluations(o) + 4 * (1 + kMaxShapeTurns) + 11 + 2 + print + kMaxShapeTurns + 2 + print);
+            planned_evaluations(o) + 4 * (1 + kMaxShapeTurns) + 11 + 2 + print + kMaxShapeTurns + 3 + print);
   // The polish: one evaluation at the result, then its runs at each further iteration (at most: it stops once
   // converged).
   RefinerOptions polished = o;
@@ -464,18 +464,34 @@ TEST(Metrics, AddAddsAndAuc) {
   EXPECT_NEAR(accuracy_auc({0.1, 0.0}, 0.05), 50.0, 1e-9);
 }
 
+// A deprecated key is read as its current one; a config that gives both is refused, naming both.
+TEST(RefinerOptions, DeprecatedNamesAreReadAsTheCurrentOnes) {
+  const RefinerOptions o = RefinerOptions::from_yaml_string("explore_tolerance: 0.05\nexplore_texture_weight: 2\n");
+  EXPECT_EQ(o.shape_tolerance, 0.05);
+  EXPECT_EQ(o.scan_texture_weight, 2.0);
+  try {
+    RefinerOptions::from_yaml_string("explore_tolerance: 0.05\nshape_tolerance: 0.02\n", "old.yaml");
+    ADD_FAILURE() << "both names were accepted";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("old.yaml: explore_tolerance is the deprecated name of shape_tolerance"),
+              std::string::npos)
+        << e.what();
+  }
+  EXPECT_THROW(RefinerOptions::from_yaml_string("explore_tolerance: 0.5\n"), std::runtime_error);  // its range
+}
+
 TEST(RefinerOptions, ShippedPresetsLoadAndDefaultYamlHoldsTheDefaults) {
   const std::string dir = std::string(DIFFDOPE_SOURCE_DIR) + "/config/";
   // default.yaml spells out the struct's defaults (read onto a base that differs in every field checked).
   RefinerOptions other;
   other.batch_size = 3, other.iterations = 7, other.coarse_fraction = 0.1, other.successive_halving = false;
-  other.explore_tolerance = 0.05, other.print_search = 0.1, other.render.lod_pixel_error = 2, other.retry_turn = 1;
+  other.shape_tolerance = 0.05, other.print_search = 0.1, other.render.lod_pixel_error = 2, other.retry_turn = 1;
   const RefinerOptions d = RefinerOptions::from_yaml_file(dir + "default.yaml", other), want;
   EXPECT_EQ(d.batch_size, want.batch_size);
   EXPECT_EQ(d.iterations, want.iterations);
   EXPECT_EQ(d.coarse_fraction, want.coarse_fraction);
   EXPECT_EQ(d.successive_halving, want.successive_halving);
-  EXPECT_EQ(d.explore_tolerance, want.explore_tolerance);
+  EXPECT_EQ(d.shape_tolerance, want.shape_tolerance);
   EXPECT_EQ(d.print_search, want.print_search);
   EXPECT_EQ(d.retry_turn, want.retry_turn);
   EXPECT_EQ(d.render.lod_pixel_error, want.render.lod_pixel_error);
@@ -488,7 +504,7 @@ TEST(RefinerOptions, ShippedPresetsLoadAndDefaultYamlHoldsTheDefaults) {
   EXPECT_EQ(p.coarse_fraction, 0.0);
   EXPECT_FALSE(p.successive_halving);
   EXPECT_EQ(p.early_stop_patience, 0);
-  EXPECT_EQ(p.explore_tolerance, 0.0);
+  EXPECT_EQ(p.shape_tolerance, 0.0);
   EXPECT_EQ(p.print_search, 0.0);
   EXPECT_EQ(p.retry_turn, 0.0);
   EXPECT_EQ(p.render.lod_pixel_error, 0.0);

@@ -21,7 +21,7 @@ namespace {
 
 /// The ambiguous rotations at the refiner's default tolerance, at most `n`.
 std::vector<ShapeRotation> ambiguous(const Mesh& m, int n = kMaxShapeTurns) {
-  return ambiguous_rotations(analyse_shape_rotations(m), RefinerOptions().explore_tolerance, n);
+  return ambiguous_rotations(analyse_shape_rotations(m), RefinerOptions().shape_tolerance, n);
 }
 
 double degrees(double radians) { return radians * 180.0 / M_PI; }
@@ -100,9 +100,9 @@ TEST(Refiner, ARollOnlyTheLabelShowsIsFoundByTheShapeScan) {
   o.batch_size = 16;
   o.iterations = 40;
   o.image_scale = 1.0;
-  o.explore_tolerance = 0.01;
+  o.shape_tolerance = 0.01;
   const RefineResult explored = Refiner(o).refine(cam, obs, can, start);
-  o.explore_tolerance = 0;
+  o.shape_tolerance = 0;
   const RefineResult plain = Refiner(o).refine(cam, obs, can, start);
   const double r_explored = angle_between(explored.pose.R, truth.R);
   const double r_plain = angle_between(plain.pose.R, truth.R);
@@ -111,6 +111,9 @@ TEST(Refiner, ARollOnlyTheLabelShowsIsFoundByTheShapeScan) {
   EXPECT_GT(explored.scan_turns, 0);
   EXPECT_EQ(plain.scan_turns, 0);
   EXPECT_LT(explored.loss.total, plain.loss.total);
+  o.shape_tolerance = 0.01;
+  o.shape_scan = false;
+  EXPECT_EQ(Refiner(o).refine(cam, obs, can, start).scan_turns, 0);
 }
 
 TEST(ShapeRotations, RevolutionAxesAreTheCylindersAxisAndNoneOfABox) {
@@ -170,6 +173,13 @@ TEST(Refiner, ThePrintAlignmentTurnsAboutTheAxisToTheLabel) {
   EXPECT_LT((aligned.pose.t - s.truth.t).norm(), 0.002);
   // The loss at the turned pose: within kPrintLossTolerance of the start's, which fits silhouette and depth as well.
   EXPECT_LE(aligned.loss.total, (1 + kPrintLossTolerance) * aligned.initial_loss);
+  // Without the shape scan the alignment turns it all the same: the shape's axis is known (shape_tolerance).
+  o.print_search = RefinerOptions().print_search;
+  o.shape_scan = false;
+  const RefineResult unscanned = Refiner(o).refine(s.cam, s.obs, s.can, start);
+  EXPECT_EQ(unscanned.scan_turns, 0);
+  EXPECT_LT(angle_between(unscanned.pose.R, s.truth.R), 1.0);
+  EXPECT_NEAR(degrees(std::abs(unscanned.print_turn)), 12.0, 1.0);
 }
 
 TEST(PrintAlignment, TakesTheTextureMinimumWithinRangeUnlessTheLossRises) {
@@ -292,7 +302,7 @@ TEST(Refiner, WithRgbAloneThePrintAlignmentIsSkipped) {
 }
 
 TEST(Refiner, AboutATrackedStartThePrintIsSoughtOnlyNearby) {
-  // The labelled can of the test above in refine_all: from a tracked start (explore false) the alignment
+  // The labelled can of the test above in refine_all: from a tracked start (StartKind::kTracked) the alignment
   // searches +-kTrackedPrintSearch (10 degrees), enough for the spin since the last frame; from a detection, its
   // whole range.
   const test::LabelledCan s = test::labelled_can();

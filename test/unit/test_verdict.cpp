@@ -120,7 +120,7 @@ TEST(Verdict, TheRefinerTrustsARightPrintAndNotAWrongTurn) {
   o.batch_size = 4;
   o.iterations = 0;  // score the start itself
   o.image_scale = 1.0;
-  o.explore_tolerance = 0;
+  o.shape_tolerance = 0;
   const RefineResult right = Refiner(o).refine(cam, obs, can, truth);
   const Pose turned = truth * test::about_can_axis(60);
   const RefineResult wrong = Refiner(o).refine(cam, obs, can, turned);

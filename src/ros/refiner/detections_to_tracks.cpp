@@ -26,8 +26,9 @@ diffdope::Pose Worker::meshPoseInCamera(const geometry_msgs::PoseStamped& pose, 
       // Waits ~tf_timeout in wall time: tf2's own timeout sleeps in ROS time, which stands still while a bag
       // is paused or over (sim time), and the worker would hang there.
       const auto available = [&] {
-        return !time_travel ? publishers_.tf_buffer->canTransform(camera, source, frame.header.stamp)
-                            : publishers_.tf_buffer->canTransform(camera, frame.header.stamp, source, pose.header.stamp, fixed_frame);
+        const tf2_ros::Buffer& tf = *publishers_.tf_buffer;
+        return !time_travel ? tf.canTransform(camera, source, frame.header.stamp)
+                            : tf.canTransform(camera, frame.header.stamp, source, pose.header.stamp, fixed_frame);
       };
       const ros::WallTime deadline = ros::WallTime::now() + ros::WallDuration(settings_.tf_timeout);
       while (!available() && ros::WallTime::now() < deadline && ros::ok()) ros::WallDuration(0.005).sleep();

@@ -85,8 +85,8 @@ class InputSync {
   /// The first rgb message after a silence (or ever): the watchdog counts from it or the last synchronized set,
   /// whichever is later, so a pause of the inputs is not counted as a failure to pair them.
   ros::WallTime arrivals_resumed_;
-  ros::WallTime last_rejected_;
-  std::set<std::string> noted_;  // camera_info warnings already given (each once: they hold for every frame)  // the last message dropped as malformed: its own error explains the gap
+  ros::WallTime last_rejected_;  // the last message dropped as malformed: its own error explains the gap
+  std::set<std::string> noted_;  // camera_info warnings already given (each once: they hold for every frame)
   ros::WallTime last_sync_;
 };
 

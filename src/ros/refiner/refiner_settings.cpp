@@ -7,6 +7,7 @@
 #include <stdexcept>
 
 #include "base/option_range.hpp"
+#include "diffdope/option_table.hpp"
 #include "diffdope_ros/error_reporter.hpp"
 #include "diffdope_ros/runtime_settings.hpp"
 
@@ -42,8 +43,6 @@ void check_refiner_settings(RefinerSettings& s) {
 
 namespace {
 
-/// The ~parameters named in cfg/Refiner.cfg that are set, each read once with its type; the first of the wrong
-/// type goes to `error` (unless it holds one already).
 /// The ~parameters among `names` that are set, each read as a `Value`; the first of the wrong type is `error`.
 template <typename Value, typename Param>
 void read_typed(const ros::NodeHandle& pnh, const std::vector<Param>& names, const char* type,
@@ -56,6 +55,8 @@ void read_typed(const ros::NodeHandle& pnh, const std::vector<Param>& names, con
   }
 }
 
+/// The ~parameters named in cfg/Refiner.cfg that are set, each read once with its type; the first of the wrong
+/// type goes to `error` (unless it holds one already).
 dynamic_reconfigure::Config read_runtime_parameters(const ros::NodeHandle& pnh, std::string& error) {
   dynamic_reconfigure::Config names, out;
   RefinerConfig::__getDefault__().__toMessage__(names);
@@ -63,6 +64,22 @@ dynamic_reconfigure::Config read_runtime_parameters(const ros::NodeHandle& pnh, 
   read_typed<double>(pnh, names.doubles, "a number", out.doubles, error);
   read_typed<bool>(pnh, names.bools, "true or false", out.bools, error);
   read_typed<std::string>(pnh, names.strs, "a string", out.strs, error);
+  // A deprecated name is read as its current one when that is a parameter here. When both are set, the current
+  // one holds: the reconfigure server writes it to the parameter server, where a respawned node finds it beside
+  // the launch file's deprecated one.
+  for (const diffdope::RenamedOption& r : diffdope::renamed_refiner_options()) {
+    for (dynamic_reconfigure::DoubleParameter p : names.doubles) {
+      if (p.name != r.current || !pnh.hasParam(r.deprecated)) continue;
+      if (pnh.hasParam(r.current)) {
+        ROS_WARN_STREAM("~" << r.deprecated << " is deprecated and ignored: ~" << r.current << " is set");
+      } else if (pnh.getParam(r.deprecated, p.value)) {
+        ROS_WARN_STREAM("~" << r.deprecated << " is deprecated: read as ~" << r.current);
+        out.doubles.push_back(p);
+      } else if (error.empty()) {
+        error = std::string("~") + r.deprecated + ": expected a number";
+      }
+    }
+  }
   return out;
 }
 

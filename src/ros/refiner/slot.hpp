@@ -34,7 +34,7 @@ struct Slot {
   std::atomic<int> tracking{0};  // instances whose track is alive (diagnostics; the tracks are the worker's)
 };
 
-/// Written only by set-up; every thread reads it (what each may change in a slot: the comments above).
+/// The list is set-up's, and every thread reads it; what each thread may change inside a slot: the comments above.
 using Slots = std::vector<std::unique_ptr<Slot>>;
 
 }  // namespace diffdope_ros

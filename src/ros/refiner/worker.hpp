@@ -84,8 +84,9 @@ class Worker {
                                                         const std::vector<diffdope::RefineResult>& results,
                                                         std::vector<std::string>* skipped, ros::WallTime start);
   void reportLostTrack(const Slot& slot, int instance);
-  void publishOverlay(const Frame& frame, const TargetList& targets, const std::vector<diffdope::RefineResult>& results);
-  void publishMarkers(const Frame& frame, const TargetList& targets, const std::vector<diffdope::RefineResult>& results);
+  using Results = std::vector<diffdope::RefineResult>;
+  void publishOverlay(const Frame& frame, const TargetList& targets, const Results& results);
+  void publishMarkers(const Frame& frame, const TargetList& targets, const Results& results);
 
   // The worker's alone: changed only on its thread (options_ only in applyPendingSettings).
   WorkerOptions options_;
