@@ -205,6 +205,9 @@ enum class RefineStage {
   kScore,              // the result's scores, curvature and verdict
 };
 constexpr int kRefineStages = 8;
+/// "descent", "weigh_starts", "weigh_candidate", "derive_pixels", "polish", "align_print_and_step",
+/// "weigh_shape_turns", "score".
+const char* to_string(RefineStage stage);
 
 /// What a refinement did, with scores a caller can threshold.
 struct RefineResult {

@@ -108,6 +108,20 @@ VerdictState verdict_state(const RefineResult& r) {
   return r.plausible ? VerdictState::kPlausible : VerdictState::kImplausible;
 }
 
+const char* to_string(RefineStage stage) {
+  switch (stage) {
+    case RefineStage::kDescent: return "descent";
+    case RefineStage::kWeighStarts: return "weigh_starts";
+    case RefineStage::kWeighCandidate: return "weigh_candidate";
+    case RefineStage::kDerivePixels: return "derive_pixels";
+    case RefineStage::kPolish: return "polish";
+    case RefineStage::kAlignPrintAndStep: return "align_print_and_step";
+    case RefineStage::kWeighShapeTurns: return "weigh_shape_turns";
+    case RefineStage::kScore: return "score";
+  }
+  return "?";
+}
+
 const char* to_string(VerdictState state) {
   switch (state) {
     case VerdictState::kPlausible: return "plausible";

@@ -10,6 +10,7 @@
 // % under 10 mm and 5 mm, median ms per object; then the same per object and level (a rule that helps one
 // object and hurts another shows there), and how often the verdict's `plausible` agrees with the error.
 #include <algorithm>
+#include <array>
 #include <climits>
 #include <cstdio>
 #include <filesystem>
@@ -223,6 +224,11 @@ int main(int argc, char** argv) {
 
     std::vector<double> given_ious;  // --masks coarse: per result, the mask given against the visible one
     int masks_checked = 0, masks_replaced = 0;  // given masks checked against depth, and replaced by its pixels
+    // Where the evaluations went: per stage, the sum and the most one refinement made (retried results, which
+    // hold two refinements' counts, are left out of the most).
+    std::array<double, kRefineStages> stage_sum{};
+    std::array<long, kRefineStages> stage_most{};
+    long stage_results = 0;
     std::map<std::string, LevelStats> stats;
     std::map<int, std::map<std::string, LevelStats>> object_stats;  // by obj_id, then level
     VerdictTally verdicts;
@@ -338,6 +344,14 @@ int main(int argc, char** argv) {
           line["retried"] = r.retried;
           line["polish_iterations"] = r.polish_iterations;
           line["newton_steps"] = r.newton_steps;
+          line["evaluations"] = r.evaluations;
+          for (size_t stage = 0; stage < size_t(kRefineStages); ++stage) {
+            const long made = r.stage_evaluations[stage];
+            line["stage_evaluations"][to_string(RefineStage(stage))] = made;
+            stage_sum[stage] += double(made);
+            if (!r.retried) stage_most[stage] = std::max(stage_most[stage], made);
+          }
+          ++stage_results;
           line["given_mask_iou"] = mask_iou_given;  // the mask given against the visible one (-1: none given)
           line["given_mask_offset"] = r.given_mask_offset;
           line["given_mask_replaced"] = r.given_mask_replaced;
@@ -416,6 +430,17 @@ int main(int argc, char** argv) {
     if (masks_checked > 0) {
       std::printf("masks given: %d of %d checked against depth replaced by its pixels\n", masks_replaced, masks_checked);
       summary["given_masks"] = {{"checked", masks_checked}, {"replaced", masks_replaced}};
+    }
+    if (stage_results > 0) {
+      std::printf("evaluations by stage, mean per object (retries included) / most in one refinement / planned:");
+      for (size_t stage = 0; stage < size_t(kRefineStages); ++stage) {
+        const RefineStage s = RefineStage(stage);
+        const double mean = stage_sum[stage] / double(stage_results);
+        const long planned = planned_evaluations(options, s);
+        std::printf("%s %s %.0f / %ld / %ld", stage == 0 ? "" : ",", to_string(s), mean, stage_most[stage], planned);
+        summary["stage_evaluations"][to_string(s)] = {{"mean", mean}, {"most", stage_most[stage]}, {"planned", planned}};
+      }
+      std::printf("\n");
     }
     if (!summary_path.empty()) std::ofstream(summary_path) << summary.dump(2) << "\n";
     if (all_ref.empty() && (skipped_scenes > 0 || skipped_files > 0))

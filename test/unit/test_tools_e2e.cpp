@@ -11,6 +11,7 @@
 #include <unistd.h>
 
 #include "diffdope/bop.hpp"
+#include "diffdope/refiner.hpp"
 
 namespace fs = std::filesystem;
 using nlohmann::json;
@@ -67,9 +68,12 @@ TEST(ToolsEndToEnd, GenerateDatasetPerturbAndEvaluate) {
   for (std::string line; std::getline(in, line); ++lines) {
     const json j = json::parse(line);
     for (const char* key : {"scene_id", "im_id", "obj_id", "inst", "level", "sample", "R", "t", "init_R", "init_t",
-                            "time_ms", "loss"})
+                            "time_ms", "loss", "evaluations", "stage_evaluations"})
       EXPECT_TRUE(j.contains(key)) << key;
     EXPECT_EQ(j["R"].size(), 9u);
+    long made = 0;  // the stages' evaluations add up to the result's
+    for (const auto& [stage, n] : j["stage_evaluations"].items()) made += n.get<long>();
+    EXPECT_EQ(made, j["evaluations"].get<long>());
     levels.insert(j["level"].get<std::string>());
   }
   EXPECT_GE(lines, 2 * 6);  // 2 levels x (3 scenes x >= 2 objects)
@@ -78,6 +82,11 @@ TEST(ToolsEndToEnd, GenerateDatasetPerturbAndEvaluate) {
   for (const char* level : {"medium", "hard", "all"}) ASSERT_TRUE(s.contains(level)) << level;
   EXPECT_GT(s["medium"]["auc_refined"].get<double>(), s["medium"]["auc_initial"].get<double>() + 10);
   EXPECT_GT(s["hard"]["auc_refined"].get<double>(), s["hard"]["auc_initial"].get<double>() + 20);
+  // Every stage within its plan; the descent is where most evaluations go.
+  ASSERT_EQ(s["stage_evaluations"].size(), size_t(diffdope::kRefineStages));
+  for (const auto& [stage, e] : s["stage_evaluations"].items())
+    EXPECT_LE(e["most"].get<long>(), e["planned"].get<long>()) << stage;
+  EXPECT_GT(s["stage_evaluations"]["descent"]["mean"].get<double>(), 0.0);
 }
 
 TEST(ToolsEndToEnd, EvalReportsMissingDatasetClearly) {
