@@ -452,6 +452,16 @@ long planned_evaluations(const RefinerOptions& o);
 ///   - kScore: the scoring render and the curvature probe.
 long planned_evaluations(const RefinerOptions& o, RefineStage stage);
 
+/// Why refine() would refuse `start` as an initial pose of `mesh` seen by `camera` with `o` ("" when it would
+/// not): not finite, its centre not beyond render.near_plane (behind the camera), outside the image or too small
+/// in it at the refining scale. The check refine() makes of every start.
+std::string start_problem(const Camera& camera, const Mesh& mesh, const Pose& start, const RefinerOptions& o);
+/// The indices of `starts` that refine() accepts (start_problem() empty), in order; every index when none is, so
+/// that refining them still says why. A caller's own guesses (a track's constant-velocity prediction, which a
+/// wrong frame can throw behind the camera) are dropped this way rather than failing the object with them.
+std::vector<size_t> usable_starts(const Camera& camera, const Mesh& mesh, const std::vector<Pose>& starts,
+                                  const RefinerOptions& o);
+
 /// One plain gradient step of the refiner's parametrisation: translation of the object's centre `pivot`
 /// (camera frame) and rotation about it, with the scaling described at RefinerOptions::lr_low.
 Pose refiner_step(const Pose& pose, const Vector6d& gradient, double lr, double diameter,

@@ -62,6 +62,36 @@ void check_in_view(const Camera& cam, const Mesh& mesh, const Pose& pose, double
   }
 }
 
+}  // namespace
+
+std::string start_problem(const Camera& camera, const Mesh& mesh, const Pose& start, const RefinerOptions& o) {
+  if (!start.is_valid(1e-4)) return "refine: initial pose is not finite or its rotation is not orthonormal";
+  const Eigen::Vector3d centre = start * mesh.center();
+  if (!(centre.z() > o.render.near_plane))
+    return centre.z() > 0 ? "refine: the initial pose puts the object's centre at z = " + std::to_string(centre.z()) +
+                                " m, not beyond render.near_plane (" + std::to_string(o.render.near_plane) + " m)"
+                          : "refine: initial pose puts the object behind the camera (z = " + std::to_string(centre.z()) +
+                                " m)";
+  try {
+    check_in_view(scaled_camera(camera, o.image_scale), mesh, start, o.render.near_plane);
+  } catch (const std::invalid_argument& e) {
+    return e.what();
+  }
+  return "";
+}
+
+std::vector<size_t> usable_starts(const Camera& camera, const Mesh& mesh, const std::vector<Pose>& starts,
+                                  const RefinerOptions& o) {
+  std::vector<size_t> usable;
+  for (size_t k = 0; k < starts.size(); ++k)
+    if (start_problem(camera, mesh, starts[k], o).empty()) usable.push_back(k);
+  if (usable.empty())
+    for (size_t k = 0; k < starts.size(); ++k) usable.push_back(k);
+  return usable;
+}
+
+namespace {
+
 /// The checks of RefineRun's input that need no images resized: views, meshes, starts in front of the camera and
 /// in view. Throws std::invalid_argument naming the view (of several) that fails.
 void validate_views(const RefinerOptions& o, const std::vector<RefineView>& views, const std::vector<Pose>& initials,
@@ -79,18 +109,9 @@ void validate_views(const RefinerOptions& o, const std::vector<RefineView>& view
       throw std::invalid_argument("refine: need at least an rgb or a depth image" + which);
     if (view.observed.has_mask() != given_mask)
       throw std::invalid_argument("refine: either every view has a mask or none" + which);
-    for (const Pose& initial : initials) {
-      if (!initial.is_valid(1e-4))
-        throw std::invalid_argument("refine: initial pose is not finite or its rotation is not orthonormal");
-      const Eigen::Vector3d centre0 = initial * view.mesh->center();
-      if (!(centre0.z() > o.render.near_plane))
-        throw std::invalid_argument(
-            centre0.z() > 0 ? "refine: the initial pose puts the object's centre at z = " + std::to_string(centre0.z()) +
-                                  " m, not beyond render.near_plane (" + std::to_string(o.render.near_plane) + " m)" + which
-                            : "refine: initial pose puts the object behind the camera (z = " + std::to_string(centre0.z()) +
-                                  " m)" + which);
-      check_in_view(scaled_camera(view.camera, o.image_scale), *view.mesh, initial, o.render.near_plane);
-    }
+    for (const Pose& initial : initials)
+      if (const std::string problem = start_problem(view.camera, *view.mesh, initial, o); !problem.empty())
+        throw std::invalid_argument(problem + which);
   }
 }
 

@@ -167,6 +167,25 @@ TEST(Refiner, SuccessiveHalvingDropsTheWorseHalfThreeTimes) {
   EXPECT_EQ(planned_evaluations(polished), planned_evaluations(o) + 1 + polished.polish_runs * 30);
 }
 
+// A start behind the camera or outside the image is named by start_problem(); usable_starts() leaves such
+// starts out of several, and keeps them all when none is usable (refining them then says why).
+TEST(Refiner, UnusableStartsAreNamedAndLeftOutOfSeveral) {
+  const Scene s = make_scene(2);
+  const RefinerOptions o = test_options();
+  Pose behind = s.truth, aside = s.truth;
+  behind.t.z() = -0.3;
+  aside.t.x() += 5.0;
+  EXPECT_EQ(start_problem(s.cam, s.mesh, s.truth, o), "");
+  EXPECT_NE(start_problem(s.cam, s.mesh, behind, o).find("behind the camera"), std::string::npos);
+  EXPECT_NE(start_problem(s.cam, s.mesh, aside, o).find("outside the image"), std::string::npos);
+  EXPECT_EQ(usable_starts(s.cam, s.mesh, {s.truth, behind, aside}, o), (std::vector<size_t>{0}));
+  EXPECT_EQ(usable_starts(s.cam, s.mesh, {behind, s.truth}, o), (std::vector<size_t>{1}));
+  EXPECT_EQ(usable_starts(s.cam, s.mesh, {behind, aside}, o), (std::vector<size_t>{0, 1}));
+  // What refine() says of the same starts.
+  const RefineResult r = Refiner(o).refine_all(s.cam, s.obs, {ObjectTarget{&s.mesh, s.truth, s.obs.mask, {behind}}})[0];
+  EXPECT_EQ(r.error, start_problem(s.cam, s.mesh, behind, o));
+}
+
 TEST(Refiner, SeveralStartsTheBetterOneWins) {
   // A good start (a tracked pose) and a hopeless one (a wrong detection, 90 deg off): whichever order they
   // come in, the winner comes from the good one and RefineResult says so.

@@ -6,10 +6,11 @@
 
 namespace diffdope_ros {
 
-std::vector<diffdope_ros::RefinedPose> Worker::refineAndPublish(const Frame& frame, const SeedList& seeds,
+std::vector<diffdope_ros::RefinedPose> Worker::refineAndPublish(const Frame& frame, const SeedList& offered,
                                                                         const diffdope::RefinerOptions& options,
                                                                         std::vector<std::string>* skipped) {
   const ros::WallTime start = ros::WallTime::now();
+  const SeedList seeds = usableSeeds(frame, offered, options);
   std::vector<diffdope::ObjectTarget> targets;
   TargetList target_of;  // (slot, instance) per target
   std::vector<size_t> seeds_of;
@@ -72,6 +73,32 @@ std::vector<diffdope_ros::RefinedPose> Worker::refineAndPublish(const Frame& fra
   for (const diffdope::RefineResult& r : results) evaluations += double(r.evaluations);
   refine_time_.observe(evaluations, (ros::WallTime::now() - refine_start).toSec());
   return publishResults(frame, seeds, target_of, seeds_of, results, skipped, start);
+}
+
+Worker::SeedList Worker::usableSeeds(const Frame& frame, const SeedList& offered,
+                                     const diffdope::RefinerOptions& options) const {
+  SeedList out = offered;
+  for (TargetSeeds& target : out) {
+    const Slot& s = *slots_[target.object];
+    std::vector<diffdope::Pose> poses;
+    for (const diffdope::Seed& seed : target.starts) poses.push_back(seed.pose);
+    const std::vector<size_t> usable = diffdope::usable_starts(frame.camera, *s.mesh, poses, options);
+    if (usable.size() == poses.size()) continue;
+    std::vector<bool> keep(poses.size(), false);
+    for (size_t k : usable) keep[k] = true;
+    std::vector<diffdope::Seed> kept;
+    for (size_t k = 0; k < poses.size(); ++k) {
+      if (keep[k]) {
+        kept.push_back(target.starts[k]);
+        continue;
+      }
+      const std::string why = diffdope::start_problem(frame.camera, *s.mesh, poses[k], options);
+      ROS_DEBUG_STREAM("'" << s.instances[size_t(target.instance)].name << "': its "
+                           << diffdope::to_string(target.starts[k].source) << " start is left out: " << why);
+    }
+    target.starts = std::move(kept);
+  }
+  return out;
 }
 
 }  // namespace diffdope_ros

@@ -74,6 +74,9 @@ class Worker {
   diffdope_ros::Refine::Response processRequest(const diffdope_ros::Refine::Request& req,
                                                 const std::shared_ptr<const Frame>& frame);
   // Refinement (refine_frame.cpp) and its outputs (publishing.cpp, visualization.cpp).
+  /// `offered` without the starts the refiner would refuse (diffdope::usable_starts(): a prediction thrown
+  /// behind the camera or out of the image by a wrong frame), unless that is all of an instance's starts.
+  SeedList usableSeeds(const Frame& frame, const SeedList& offered, const diffdope::RefinerOptions& options) const;
   /// Refines and publishes; objects that could not be refined are named (with the reason) in `skipped`.
   std::vector<diffdope_ros::RefinedPose> refineAndPublish(const Frame& frame, const SeedList& seeds,
                                                           const diffdope::RefinerOptions& options,
