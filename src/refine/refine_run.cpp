@@ -38,28 +38,29 @@ cv::Rect search_box(const cv::Rect& box) {
   return cv::Rect(box.x - gx, box.y - gy, box.width + 2 * gx, box.height + 2 * gy);
 }
 
-/// An initial pose whose object is outside the image, or projects smaller than kMinProjectedPixels at the
-/// refining scale, has nothing to be refined against.
-void check_in_view(const Camera& cam, const Mesh& mesh, const Pose& pose, double near_plane) {
-  if (mesh.content_id() == 0) return;  // not finalized: the renderer says so
+/// Why an initial pose has nothing to be refined against ("" when it has): its object is outside the image, or
+/// projects smaller than kMinProjectedPixels at the refining scale.
+std::string out_of_view(const Camera& cam, const Mesh& mesh, const Pose& pose, double near_plane) {
+  if (mesh.content_id() == 0) return "";  // not finalized: the renderer says so
   std::vector<Eigen::Vector3d> corners = mesh.bbox_corners();
   for (Eigen::Vector3d& c : corners) c = pose * c;
   const Eigen::AlignedBox2d box = cam.project_bounds(corners, near_plane);
-  if (box.isEmpty()) return;  // the object reaches the camera plane: its projection is unbounded, so in view
+  if (box.isEmpty()) return "";  // the object reaches the camera plane: its projection is unbounded, so in view
   const Eigen::AlignedBox2d image(Eigen::Vector2d(-0.5, -0.5), Eigen::Vector2d(cam.width - 0.5, cam.height - 0.5));
   std::ostringstream m;
   m.precision(4);
   if (!box.intersects(image)) {
     m << "refine: initial pose puts the object outside the image (t = " << pose.t.transpose() << " m)";
-    throw std::invalid_argument(m.str());
+    return m.str();
   }
   const double z = (pose * mesh.center()).z();
   const double pixels = mesh.diameter() * std::max(cam.fx, cam.fy) / z;
   if (pixels < kMinProjectedPixels) {
     m << "refine: at the initial pose the object is " << pixels << " pixels across at the refining scale (z = "
       << z << " m); at least " << kMinProjectedPixels << " are needed";
-    throw std::invalid_argument(m.str());
+    return m.str();
   }
+  return "";
 }
 
 }  // namespace
@@ -72,12 +73,7 @@ std::string start_problem(const Camera& camera, const Mesh& mesh, const Pose& st
                                 " m, not beyond render.near_plane (" + std::to_string(o.render.near_plane) + " m)"
                           : "refine: initial pose puts the object behind the camera (z = " + std::to_string(centre.z()) +
                                 " m)";
-  try {
-    check_in_view(scaled_camera(camera, o.image_scale), mesh, start, o.render.near_plane);
-  } catch (const std::invalid_argument& e) {
-    return e.what();
-  }
-  return "";
+  return out_of_view(scaled_camera(camera, o.image_scale), mesh, start, o.render.near_plane);
 }
 
 std::vector<size_t> usable_starts(const Camera& camera, const Mesh& mesh, const std::vector<Pose>& starts,
