@@ -7,7 +7,7 @@
 // median time per refined frame.
 //
 //   bench_tracking [--objects 1|2|3] [--frames N (90)] [--rate HZ (30)] [--every K (2)] [--detector-every K (3)]
-//                  [--latency S (0.15)] [--masks given|none] [--config FILE] [--seed S (1)]
+//                  [--latency S (0.15)] [--masks given|none] [--depth given|none] [--config FILE] [--seed S (1)]
 //                  [--track-budget B,I (TrackOptions': 8,20)] [--quiet]
 #include <algorithm>
 #include <chrono>
@@ -39,6 +39,7 @@ struct Args {
   int detector_every = 3;
   double latency = 0.15;
   bool masks = true;
+  bool depth = true;  // none: colour alone, as a node with use_depth false
   std::string config;
   uint64_t seed = 1;
   int track_batch = TrackOptions().batch_size, track_iterations = TrackOptions().iterations;
@@ -49,7 +50,7 @@ struct Args {
   std::cerr << "bench_tracking: " << why << "\n"
             << "usage: bench_tracking [--objects 1|2|3] [--frames N (90)] [--rate HZ (30)] [--every K (2)]\n"
                "                      [--detector-every K (3)] [--latency S (0.15)] [--masks given|none]\n"
-               "                      [--config FILE] [--seed S (1)] [--track-budget B,I (8,20)] [--quiet]\n";
+               "                      [--depth given|none] [--config FILE] [--seed S (1)] [--track-budget B,I (8,20)] [--quiet]\n";
   std::exit(2);
 }
 
@@ -71,6 +72,7 @@ Args parse(int argc, char** argv) {
       else if (opt == "--detector-every") a.detector_every = std::stoi(v);
       else if (opt == "--latency") a.latency = std::stod(v);
       else if (opt == "--masks" && (v == "given" || v == "none")) a.masks = v == "given";
+      else if (opt == "--depth" && (v == "given" || v == "none")) a.depth = v == "given";
       else if (opt == "--config") a.config = v;
       else if (opt == "--seed") a.seed = std::stoull(v);
       else if (opt == "--track-budget" && v.find(',') != std::string::npos)
@@ -143,7 +145,7 @@ int main(int argc, char** argv) {
       const SyntheticScene scene = synthesize_scene(*renderer, cam, scene_objects, SyntheticNoise(), scene_seed);
       Observation frame;
       frame.rgb = scene.rgb;
-      frame.depth = scene.depth;
+      if (args.depth) frame.depth = scene.depth;
       std::vector<ObjectTarget> targets;
       std::vector<size_t> target_object;
       std::vector<std::vector<Seed>> target_starts;
@@ -187,8 +189,9 @@ int main(int argc, char** argv) {
       }
     }
     std::sort(frame_ms.begin(), frame_ms.end());
-    std::printf("\n%zu refined frames of %d (every %d at %.0f Hz), masks %s; median %.0f ms per frame\n",
+    std::printf("\n%zu refined frames of %d (every %d at %.0f Hz), masks %s, depth %s; median %.0f ms per frame\n",
                 frame_ms.size(), args.frames, args.every, args.rate, args.masks ? "given" : "none",
+                args.depth ? "given" : "none",
                 frame_ms.empty() ? 0.0 : frame_ms[frame_ms.size() / 2]);
     for (const auto& [i, e] : errors) {
       const auto mean = [](const std::vector<double>& v) {

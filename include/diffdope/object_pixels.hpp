@@ -42,4 +42,15 @@ struct ObjectPixelsOptions {
 cv::Mat derive_object_pixels(const Camera& camera, const cv::Mat& depth, const std::vector<RenderImage>& renders,
                              const ObjectPixelsOptions& options, const cv::Mat& rgb = cv::Mat());
 
+/// Without depth: the probability that each pixel shows the object, from its colour alone (CV_32F in [0, 1]; 0
+/// outside the reach), as region-based trackers weigh colour (PWP3D). The object's colour histogram comes from
+/// the core of what every render covers (pixels deeper inside than `margin`, projected at the render's nearest
+/// depth, at least the inner half: the object's wherever within the margin it is); its surroundings' from a ring
+/// of the same width beyond the reach (what the renders cover, grown by the margin). Within the reach, and
+/// `bounds` when given, a pixel's colour decides between them (equal priors). Without a ring or a core (the
+/// object fills the image, or covers no pixel) the result is empty. Throws std::invalid_argument on an rgb image
+/// that is not CV_32FC3 of the camera's size, a render of another size, or a margin out of (0, 1].
+cv::Mat derive_object_pixels_from_colour(const Camera& camera, const cv::Mat& rgb,
+                                         const std::vector<RenderImage>& renders, const ObjectPixelsOptions& options);
+
 }  // namespace diffdope

@@ -309,4 +309,52 @@ cv::Mat derive_object_pixels(const Camera& camera, const cv::Mat& d, const std::
   return out;
 }
 
+cv::Mat derive_object_pixels_from_colour(const Camera& camera, const cv::Mat& rgb,
+                                         const std::vector<RenderImage>& renders, const ObjectPixelsOptions& options) {
+  const cv::Size size(camera.width, camera.height);
+  if (rgb.type() != CV_32FC3 || rgb.size() != size)
+    throw std::invalid_argument("derive_object_pixels_from_colour: the rgb image is not CV_32FC3 of the camera's size");
+  if (!(options.margin > 0 && options.margin <= 1))
+    throw std::invalid_argument("derive_object_pixels_from_colour: the margin must be in (0, 1] metres");
+  cv::Mat covered_any = cv::Mat::zeros(size, CV_8U), covered_all(size, CV_8U, cv::Scalar(255));
+  double z_near = std::numeric_limits<double>::infinity();
+  for (const RenderImage& img : renders) {
+    if (img.depth.size() != size || img.coverage.size() != size)
+      throw std::invalid_argument("derive_object_pixels_from_colour: a render is not the camera's size");
+    const cv::Mat covered = (img.coverage >= 0.5f) & (img.depth > 0.0f);
+    covered_any |= covered;
+    covered_all &= covered;
+    if (cv::countNonZero(covered) == 0) continue;
+    cv::Mat masked = img.depth.clone();
+    masked.setTo(std::numeric_limits<float>::infinity(), ~covered);
+    double z = 0;
+    cv::minMaxLoc(masked, &z);
+    z_near = std::min(z_near, z);
+  }
+  if (cv::countNonZero(covered_all) == 0) return cv::Mat();
+  const int radius = pixels_at(camera, options.margin, z_near);
+  // The core: deeper inside every render than the margin reaches, or the inner half where the object is thinner.
+  cv::Mat inside_distance;
+  cv::distanceTransform(covered_all, inside_distance, cv::DIST_L2, 3);
+  double deepest = 0;
+  cv::minMaxLoc(inside_distance, nullptr, &deepest);
+  const cv::Mat core = inside_distance >= std::min(double(radius), 0.5 * deepest);
+  const auto grown = [&](int r) {
+    cv::Mat out;
+    cv::dilate(covered_any, out, cv::getStructuringElement(cv::MORPH_ELLIPSE, cv::Size(2 * r + 1, 2 * r + 1)));
+    return out;
+  };
+  cv::Mat reach = grown(radius);
+  if (!options.bounds.empty()) {
+    cv::Mat in_bounds = cv::Mat::zeros(size, CV_8U);
+    in_bounds(options.bounds & cv::Rect(cv::Point(0, 0), size)).setTo(255);
+    reach &= in_bounds;
+  }
+  const cv::Mat ring = grown(2 * radius) & ~grown(radius);
+  if (cv::countNonZero(ring) == 0 || cv::countNonZero(core) == 0) return cv::Mat();
+  cv::Mat out = cv::Mat::zeros(size, CV_32F);
+  colour_holes(rgb, core, ring, reach, out);
+  return out;
+}
+
 }  // namespace diffdope

@@ -32,6 +32,21 @@ cv::Mat window_mask(const Camera& cam, const Mesh& mesh, const Pose& pose, doubl
   return m;
 }
 
+/// The median colour error (|I - R| / 3 per channel) of `render` where it covers pixels that are likely the
+/// object's (`pixels` >= 0.5); NaN where there are none.
+double median_colour_error(const cv::Mat& rgb, const RenderImage& render, const cv::Mat& pixels) {
+  std::vector<float> errors;
+  for (int y = render.roi.y; y < render.roi.y + render.roi.height; ++y)
+    for (int x = render.roi.x; x < render.roi.x + render.roi.width; ++x) {
+      if (render.coverage.at<float>(y, x) < 0.99f || pixels.at<float>(y, x) < 0.5f) continue;
+      const cv::Vec3f i = rgb.at<cv::Vec3f>(y, x), c = render.color.at<cv::Vec3f>(y, x);
+      errors.push_back((std::abs(i[0] - c[0]) + std::abs(i[1] - c[1]) + std::abs(i[2] - c[2])) / 3.f);
+    }
+  if (errors.empty()) return NAN;
+  std::nth_element(errors.begin(), errors.begin() + long(errors.size() / 2), errors.end());
+  return errors[errors.size() / 2];
+}
+
 /// Where a detector's box lets the object's pixels be (kBoxSlack).
 cv::Rect search_box(const cv::Rect& box) {
   const int gx = int(std::ceil(kBoxSlack * box.width)) + 1, gy = int(std::ceil(kBoxSlack * box.height)) + 1;
@@ -180,11 +195,16 @@ void RefineRun::set_up_loss(const std::vector<RefineView>& views) {
   const bool given_mask = views.front().observed.has_mask();
   // Without a mask the object's pixels are derived from depth (one view), or the window stands in for them, which
   // is not an observation of the silhouette. With a mask the first derivation checks it (update_object_pixels()).
-  derives_pixels_ = o.derive_mask && views.size() == 1 && views.front().observed.has_depth();
+  // Without depth either, from colour: the window's uncovered pixels would otherwise each cost a miss, pulling
+  // the render toward the camera until it fills the window.
+  const Observation& observed = views.front().observed;
+  const bool one_view = o.derive_mask && views.size() == 1;
+  pixels_from_colour_ = one_view && !given_mask && !observed.has_depth() && observed.has_rgb();
+  derives_pixels_ = one_view && (observed.has_depth() || pixels_from_colour_);
   weighs_given_mask_ = given_mask && derives_pixels_;
-  has_mask_ = given_mask || derives_pixels_;
+  has_mask_ = given_mask || (derives_pixels_ && !pixels_from_colour_);
   rederive_at_ = switch_at_ > 0 ? switch_at_ : o.iterations / 2;
-  if (!has_mask_) loss_.weight_mask = 0;
+  if (!has_mask_ && !pixels_from_colour_) loss_.weight_mask = 0;
   if (derives_pixels_ && !given_mask) loss_.weight_mask *= kDerivedMaskWeight;
   bool all_plain = true, any_depth = false, any_rgb = false;
   for (const RefineView& view : views) {
@@ -237,6 +257,12 @@ cv::Mat RefineRun::derived_pixels(Renderer& renderer, const std::vector<Pose>& p
   po.holes_from_colour = true;
   if (fine.obs.has_box()) po.bounds = search_box(fine.obs.box);
   evaluations_ += long(poses.size());
+  if (pixels_from_colour_) {
+    const std::vector<RenderImage> renders = renderer.render(fine.cam, mesh(), poses, cv::Mat());
+    cv::Mat pixels = derive_object_pixels_from_colour(fine.cam, fine.obs.rgb, renders, po);
+    if (!pixels.empty()) colour_match_error_ = median_colour_error(fine.obs.rgb, renders.front(), pixels);
+    return pixels;
+  }
   cv::Mat pixels = derive_object_pixels(fine.cam, fine.obs.depth, renderer.render(fine.cam, mesh(), poses, cv::Mat()),
                                         po, fine.obs.rgb);
   if (cv::countNonZero(pixels >= 0.5f) == 0) return cv::Mat();
@@ -246,6 +272,11 @@ cv::Mat RefineRun::derived_pixels(Renderer& renderer, const std::vector<Pose>& p
 bool RefineRun::derive_pixels(Renderer& renderer, const std::vector<Pose>& poses, double margin) {
   const cv::Mat pixels = derived_pixels(renderer, poses, margin);
   if (pixels.empty()) return false;
+  // From colour, a likely-object pixel the render misses costs what the render's colour error on the object's
+  // pixels is: the colour term then neither grows the silhouette (a miss dearer than a match) nor shrinks it (a
+  // miss free), and the pixels' probabilities decide it through the mask term.
+  if (pixels_from_colour_ && std::isfinite(colour_match_error_))
+    loss_.rgb_miss = scan_loss_.rgb_miss = res_.loss_used.rgb_miss = std::min(colour_match_error_, options_.loss.rgb_miss);
   use_pixels(pixels);
   return true;
 }

@@ -126,10 +126,14 @@ class RefineRun {
   std::vector<std::vector<LossValue>> view_values_;  // evaluate()'s scratch
   int switch_at_ = 0;  // first iteration at the fine scale (0: no coarse phase)
   LossOptions loss_, scan_loss_;
-  bool has_mask_ = false;  // the loss has a mask: given, or derived (derives_pixels_)
-  // Derived object pixels: whether they are derived, how often so far, the iteration of the second derivation,
-  // and which pixels the runs' best losses were measured under (under others they must be sought again).
+  bool has_mask_ = false;  // the loss has a mask that holds the silhouette: given, or derived from depth
+  // Derived object pixels: whether they are derived (from depth, or without it from colour: a probability, not a
+  // silhouette the verdict or the print's turns may lean on), how often so far, the iteration of the second
+  // derivation, and which pixels the runs' best losses were measured under (under others they must be sought
+  // again).
   bool derives_pixels_ = false;
+  bool pixels_from_colour_ = false;
+  double colour_match_error_ = NAN;
   bool weighs_given_mask_ = false;  // a mask was given and depth can check it (derive_mask, one view)
   int derivations_ = 0;
   int rederive_at_ = 0;

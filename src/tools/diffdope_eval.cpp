@@ -1,7 +1,7 @@
 // diffdope_eval: the paper's evaluation protocol on a BOP-format dataset.
 //   diffdope_eval --bop ROOT --split NAME --perturbations DIR --out results.jsonl [--levels easy,medium,hard]
 //                 [--config FILE] [--summary-json FILE] [--threads N] [--max-samples N] [--generate N [--seed S]]
-//                 [--masks given|none|box|coarse[:SEED]] [--method refiner|icp]
+//                 [--masks given|none|box|coarse[:SEED]] [--depth given|none] [--method refiner|icp]
 // --generate N first writes perturbation files into DIR with the paper's rule (random axis, rotate by exactly
 // the angle; random direction, translate by exactly the distance): easy (1 deg, 1 mm), medium (10 deg, 10 mm),
 // hard (40 deg, 20 mm), N samples per level for every ground-truth instance of image 0 of each scene.
@@ -46,6 +46,8 @@ int usage(int rc) {
                "                     mask, as beside DOPE; box: only the visible mask's bounding rectangle, as a 2D\n"
                "                     detector's; coarse: a segmenter's version of it (grown or shrunk, its outline\n"
                "                     wandering, blobs; include/diffdope/coarse_mask.hpp)\n"
+               "                     [--depth given|none]  none: the depth image is dropped (colour alone, as a\n"
+               "                     node with use_depth false)\n"
                "                     [--method refiner|icp]  icp: the baseline, point-to-plane ICP on the depth near\n"
                "                     the start (the mask's, or the object's pixels derived there), no verdict\n"
                "Exit status: 0 all samples evaluated, 1 an error or some samples skipped, 2 bad arguments.\n";
@@ -145,7 +147,7 @@ double apply_mask_mode(Observation& obs, const std::string& mode, uint64_t coars
 
 int main(int argc, char** argv) {
   std::string root, split, pert_dir, out_path, config, summary_path, device, symmetric_arg, masks = "given",
-                                                                                  method = "refiner";
+                                                                                  method = "refiner", depth = "given";
   std::set<std::string> levels;
   int threads = 0, max_samples = -1, generate = 0;
   uint64_t seed = 1, coarse_seed = 1;
@@ -180,7 +182,10 @@ int main(int argc, char** argv) {
                                                  std::numeric_limits<long long>::max()));
       }
     }
-    else if (a == "--method") {
+    else if (a == "--depth") {
+      if (v != "given" && v != "none") throw std::invalid_argument("--depth: unknown mode '" + v + "' (given, none)");
+      depth = v;
+    } else if (a == "--method") {
       if (v != "refiner" && v != "icp") throw std::invalid_argument("--method: unknown method '" + v + "' (refiner, icp)");
       method = v;
     } else if (a == "--levels") {
@@ -200,6 +205,10 @@ int main(int argc, char** argv) {
     return 2;
   }
   if (root.empty() || split.empty() || pert_dir.empty() || out_path.empty()) return usage(2);
+  if (method == "icp" && depth == "none") {
+    std::cerr << "diffdope_eval: --method icp needs depth (--depth none given)\n";
+    return 2;
+  }
 
   try {
     RefinerOptions options = config.empty() ? RefinerOptions() : RefinerOptions::from_yaml_file(config);
@@ -208,7 +217,7 @@ int main(int argc, char** argv) {
     options.validate();
     Refiner refiner(options);
     std::cerr << "diffdope_eval: " << (method == "icp" ? "point-to-plane ICP (the baseline)" : "backend " + refiner.backend())
-              << ", masks " << masks << "\n";
+              << ", masks " << masks << ", depth " << depth << "\n";
     const std::unique_ptr<Renderer> icp_renderer = method == "icp" ? make_cpu_renderer(options.render) : nullptr;
     std::set<int> symmetric_ids;  // --symmetric: instead of models_info.json
     if (!symmetric_arg.empty() && symmetric_arg != "none") {
@@ -290,6 +299,7 @@ int main(int argc, char** argv) {
             mesh_ptr = &data.model(p.obj_id);
             obs = data.observation(img, gt->inst);
             // One segmenter's mask per object and image, whatever the start.
+            if (depth == "none") obs.depth = cv::Mat();
             mask_iou_given = apply_mask_mode(obs, masks, coarse_seed * 0x9E3779B97F4A7C15ull +
                                                              uint64_t(scene) * 1000003ull + uint64_t(gt->inst));
           } catch (const std::exception& e) {

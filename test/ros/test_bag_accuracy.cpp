@@ -148,13 +148,20 @@ TEST(BagAccuracy, RefinedPosesTfAndScores) {
     if (each_within) {
       EXPECT_EQ(s.plausible, s.count);
     } else {
-      // RGB alone drifts along the viewing ray (1-5 cm while tracking) and, from a stale detection, turns: the
-      // verdict may reject those poses (their print no longer lines up) but never a right one (within 1 cm and 5
-      // degrees; a pose 9 mm but 16 degrees off is wrong, and rejecting it is right).
-      for (const auto& row : rec.checker->rows())
-        if (row.name == o.name && !row.plausible)
-          EXPECT_FALSE(row.refined.translation_m < 0.01 && row.refined.rotation_rad < 5 * M_PI / 180)
-              << "a pose within 1 cm and 5 deg called implausible: " << diffdope_ros::PoseChecker::formatRow(row);
+      // RGB alone leaves the distance along the viewing ray looser (a few millimetres), but the track must not
+      // drift: every pose called plausible is within 2 cm and 5 degrees. The verdict may reject a pose the print
+      // no longer lines up with, but never a right one (within 1 cm and 5 degrees; a pose 9 mm but 16 degrees off
+      // is wrong, and rejecting it is right).
+      for (const auto& row : rec.checker->rows()) {
+        if (row.name != o.name) continue;
+        const bool right = row.refined.translation_m < 0.01 && row.refined.rotation_rad < 5 * M_PI / 180;
+        if (!row.plausible)
+          EXPECT_FALSE(right) << "a pose within 1 cm and 5 deg called implausible: "
+                              << diffdope_ros::PoseChecker::formatRow(row);
+        else
+          EXPECT_TRUE(row.refined.translation_m < 0.02 && row.refined.rotation_rad < 5 * M_PI / 180)
+              << "a plausible pose drifted: " << diffdope_ros::PoseChecker::formatRow(row);
+      }
     }
     // Every plausible refined pose also went out on ~refined/<name> and on TF.
     // (Looped: recording stops at an arbitrary moment, maybe between a frame's array and its per-object poses.)
@@ -239,7 +246,7 @@ TEST(BagAccuracy, RefinedPosesTfAndScores) {
       };
       EXPECT_TRUE(used("rgb"));
       EXPECT_EQ(used("depth"), has_depth);
-      EXPECT_EQ(used("mask"), has_mask || has_depth);  // without a mask, the pixels derived from depth
+      EXPECT_TRUE(used("mask"));  // without a mask, the pixels derived from depth, or without depth from colour
       EXPECT_TRUE(p.judged);
       EXPECT_EQ(p.verdict, p.plausible ? diffdope_ros::RefinedPose::PLAUSIBLE : diffdope_ros::RefinedPose::IMPLAUSIBLE);
       EXPECT_EQ(p.error, "");
