@@ -226,3 +226,25 @@ TEST(ToolsEndToEnd, IcpBaselineRefinesEasyStartsAndJudgesNothing) {
   EXPECT_EQ(run(std::string(DIFFDOPE_EVAL_EXE) + " --bop " + root + " --split test --perturbations " + pert +
                 " --out " + (tmp.path / "x.jsonl").string() + " --method sgd > /dev/null 2>&1"), 2);
 }
+
+// --depth none drops the depth image, as a node with use_depth false: the results use no depth term and the
+// pixels colour gives (the mask term), and have no depth scores; a bad mode, or ICP (depth only), is a usage error.
+TEST(ToolsEndToEnd, EvalWithoutDepthRefinesFromColourAlone) {
+  TempDir tmp;
+  const std::string root = (tmp.path / "bop").string();
+  ASSERT_EQ(run(std::string(DIFFDOPE_MAKE_DATASET_EXE) + " --out " + root +
+                " --scenes 1 --width 320 --height 240 --seed 9 2>/dev/null"), 0);
+  const std::string pert = (tmp.path / "pert").string(), out = (tmp.path / "colour.jsonl").string();
+  const std::string eval = std::string(DIFFDOPE_EVAL_EXE) + " --bop " + root + " --split test --perturbations " + pert;
+  ASSERT_EQ(run(eval + " --out " + out + " --generate 1 --seed 4 --levels easy --masks none --depth none > /dev/null 2>&1"), 0);
+  std::ifstream in(out);
+  int lines = 0;
+  for (std::string line; std::getline(in, line); ++lines) {
+    const json j = json::parse(line);
+    EXPECT_EQ(j["terms"], json({"rgb", "mask"})) << line;
+    EXPECT_EQ(j["depth_inliers"].get<double>(), -1.0);
+  }
+  EXPECT_GE(lines, 2);
+  EXPECT_EQ(run(eval + " --out " + out + " --depth off > /dev/null 2>&1"), 2);
+  EXPECT_EQ(run(eval + " --out " + out + " --depth none --method icp > /dev/null 2>&1"), 2);
+}
