@@ -1,8 +1,8 @@
 #pragma once
 // The pixels that show an object when no mask is given: observed depth near the object rendered at an estimate,
 // less what stands in front of it and the surfaces it stands on or beside (planes found outside its reach and
-// followed into it). The refiner derives them for an object, again as its estimate improves; the calibrator for a
-// robot. Units: metres; images of the camera's size.
+// followed into it); without depth, each pixel's probability from its colour. The refiner derives them for an
+// object, again as its estimate improves; the calibrator for a robot. Units: metres; images of the camera's size.
 #include <opencv2/core.hpp>
 #include <vector>
 
@@ -27,14 +27,16 @@ struct ObjectPixelsOptions {
   /// Where no depth reading says (holes at silhouettes, dark or shiny surfaces) within reach and the hole meets
   /// the object's pixels, the colour decides when an rgb image is given: the probability of the pixel's colour under the object's colour histogram (from
   /// the pixels depth gave it) against its surroundings' (the readings near it that are not the object), as
-  /// region-based trackers weigh colour (PWP3D). Without rgb such pixels are not the object's.
+  /// region-based trackers weigh colour (PWP3D). Without rgb, or with this off, such a hole is unknown: 0.5, which
+  /// the mask term weighs neither way and an IoU (>= 0.5) counts with the object, so that a sensor's dropouts do not
+  /// count against a right pose.
   bool holes_from_colour = false;
   /// Where the object can be at all (a detector's box), in pixels; empty: anywhere.
   cv::Rect bounds;
 };
 
 
-/// The object's pixels (CV_32F in [0, 1]: 1 where depth shows it, a colour probability in holes) in `depth`
+/// The object's pixels (CV_32F in [0, 1]: 1 where depth shows it, a colour probability or 0.5 in holes) in `depth`
 /// (CV_32F metres, 0 = no reading; the camera's size), given renders of it at one or more estimates
 /// (Renderer::render() images of the camera's size; their union is the reach). `rgb` (CV_32FC3 in [0, 1], or
 /// empty) serves holes_from_colour. Throws std::invalid_argument on an empty depth, a size mismatch or a margin
@@ -45,11 +47,14 @@ cv::Mat derive_object_pixels(const Camera& camera, const cv::Mat& depth, const s
 /// Without depth: the probability that each pixel shows the object, from its colour alone (CV_32F in [0, 1]; 0
 /// outside the reach), as region-based trackers weigh colour (PWP3D). The object's colour histogram comes from
 /// the core of what every render covers (pixels deeper inside than `margin`, projected at the render's nearest
-/// depth, at least the inner half: the object's wherever within the margin it is); its surroundings' from a ring
-/// of the same width beyond the reach (what the renders cover, grown by the margin). Within the reach, and
-/// `bounds` when given, a pixel's colour decides between them (equal priors). Without a ring or a core (the
-/// object fills the image, or covers no pixel) the result is empty. Throws std::invalid_argument on an rgb image
-/// that is not CV_32FC3 of the camera's size, a render of another size, or a margin out of (0, 1].
+/// depth, at least the inner half: the object's wherever within the margin it is; renders that share no pixel
+/// each give their own core); its surroundings' from a ring of the same width beyond the reach (what the renders
+/// cover, grown by the margin). Within the reach, and `bounds` when given, a pixel's colour decides between them
+/// (equal priors; a colour neither region shows is near a half). Only `margin` and `bounds` of the options are
+/// used.
+/// Empty when no render covers a pixel or nothing is left around them for a ring (the object fills the image).
+/// Throws std::invalid_argument on an rgb image that is not CV_32FC3 of the camera's size, a render of another
+/// size, or a margin out of (0, 1].
 cv::Mat derive_object_pixels_from_colour(const Camera& camera, const cv::Mat& rgb,
                                          const std::vector<RenderImage>& renders, const ObjectPixelsOptions& options);
 

@@ -126,14 +126,18 @@ struct RefinerOptions {
   /// so far): less than half the evaluations; what it costs in accuracy: docs/benchmarks.md.
   /// false = the paper's algorithm exactly (every run goes to the end).
   bool successive_halving = true;
-  /// Without an observed mask: how far the object may be from its start, as a fraction of its size. With depth
-  /// (derive_mask), its pixels are sought this many diameters around its render at the start; otherwise the loss
-  /// looks at the initial pose's projected bounding box grown by this fraction of its size on every side.
+  /// Without an observed mask: how far the object may be from its start, as a fraction of its size. With
+  /// derive_mask, its pixels are sought this many diameters around its render at the start (from depth, or
+  /// without it from colour); otherwise the loss looks at the initial pose's projected bounding box grown by this
+  /// fraction of its size on every side.
   double no_mask_window = 0.3;  // [0, 10]
   /// Without an observed mask but with depth (one view): the object's pixels are derived (derive_object_pixels():
   /// depth near its render, less what stands in front and the surfaces it stands among) at the start, when the
   /// fine phase begins and at the chosen result, each time nearer (no_mask_window diameters, a third of that,
   /// then inlier_threshold), and the loss, the polish, the Newton steps and the verdict use them as the mask.
+  /// Without depth (one view, rgb): each pixel's probability from its colour (derive_object_pixels_from_colour())
+  /// at the same three moments, and a pixel the render misses costs its median colour error on them; the loss
+  /// uses them as the mask, the verdict does not (no silhouette to lean on).
   /// With an observed mask and depth, the start's derivation checks it: a mask whose outline lies more than half
   /// a pixel from the edge depth shows (a segmenter's, a few pixels off) is replaced by the derived pixels
   /// (RefineResult::given_mask_replaced). false: a mask is taken as given, and without one the window alone
@@ -258,7 +262,8 @@ struct RefineResult {
   // Quality scores at the refined pose (at the refiner's image scale).
   double mask_iou = -1;               // IoU of rendered and observed masks (with depth, the render less where the
                                       // observed depth shows an occluder in front: loss.occlusion_margin);
-                                      // without a mask, against the pixels derived (derive_mask); -1 with neither
+                                      // without a mask, against the pixels derived from depth (derive_mask); -1
+                                      // with neither
   double given_mask_offset = -1;      // pixels at the refining scale: how far a given mask's outline lies from the
                                       // edge depth shows at the start (outline_offset()); -1 when not measured
                                       // (no mask, no depth, several views, derive_mask false)
@@ -333,6 +338,9 @@ struct RefineView {
   Camera camera;
   Observation observed;  // rgb and / or depth, optional mask (all views have one or none)
   const Mesh* mesh = nullptr;
+  /// The mask was derived from depth alone (Calibrator::derive_mask()): where there is no depth reading it knows
+  /// nothing (its holes are 0.5), so the verdict's IoU leaves those pixels out.
+  bool mask_from_depth = false;
 };
 
 /// Refines poses. Options are passed per call (as Ceres passes Solver::Options to Solve); a call without them uses

@@ -113,6 +113,7 @@ CalibrationResult Calibrator::calibrate(const RobotModel& robot, const std::vect
     if (c.observed.has_mask() != with_masks)
       throw std::invalid_argument("calibrate: either every capture has a mask or none (capture '" + c.name + "')");
     RefineView v{c.camera, c.observed, &posed[k]};
+    v.mask_from_depth = !with_masks;
     if (!with_masks) {
       v.observed.mask = derive_mask(posed[k], c.camera, c.observed, initial, options_.mask_margin);
       if (cv::countNonZero(v.observed.mask) == 0)

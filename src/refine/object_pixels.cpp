@@ -68,10 +68,11 @@ Plane dominant_plane(const std::vector<Eigen::Vector3d>& points, double toleranc
 }
 
 /// Colour histograms of the object's pixels and of the background's, kColourBins per channel, and in each pixel
-/// of `holes` the probability that its colour is the object's (equal priors; a colour neither histogram holds
-/// counts one in each, so it stays at a half).
-void colour_holes(const cv::Mat& rgb, const cv::Mat& object, const cv::Mat& background, const cv::Mat& holes,
-                  cv::Mat& out) {
+/// of `where` the probability that its colour is the object's (equal priors). Each histogram starts from one count
+/// in every bin (a uniform prior): a colour neither region shows comes out near a half, leaning to the region
+/// with fewer pixels, whose colours are the less well known.
+void colour_probability(const cv::Mat& rgb, const cv::Mat& object, const cv::Mat& background, const cv::Mat& where,
+                        cv::Mat& out) {
   const auto bin = [](const cv::Vec3f& c) {
     int b = 0;
     for (int ch = 0; ch < 3; ++ch) b = b * kColourBins + std::clamp(int(c[ch] * kColourBins), 0, kColourBins - 1);
@@ -86,7 +87,7 @@ void colour_holes(const cv::Mat& rgb, const cv::Mat& object, const cv::Mat& back
     }
   for (int y = 0; y < rgb.rows; ++y)
     for (int x = 0; x < rgb.cols; ++x) {
-      if (!holes.at<uchar>(y, x)) continue;
+      if (!where.at<uchar>(y, x)) continue;
       const size_t b = size_t(bin(rgb.at<cv::Vec3f>(y, x)));
       const double pf = fg[b] / n_fg, pb = bg[b] / n_bg;
       out.at<float>(y, x) = float(pf / (pf + pb));
@@ -242,15 +243,17 @@ cv::Mat pixels_in_window(const Camera& camera, const cv::Mat& d, const std::vect
   if (options.touching_render) keep_groups_meeting(mask, covered_any);
   cv::Mat out;
   mask.convertTo(out, CV_32F, 1.0 / 255.0);
-  if (options.holes_from_colour && !rgb.empty()) {
+  {
     cv::Mat holes = ~(d > 0) & within_reach & inside_bounds;  // (NaN compares false: no reading)
     // Only holes that meet the object's pixels: a sensor's dropout blob elsewhere in the reach is not the object,
-    // whatever its colour.
+    // whatever its colour. Where no colour decides, such a hole is unknown (0.5): the mask term weighs it
+    // neither way, and the IoU does not count the sensor's dropouts against a right pose.
     cv::Mat next_to_object;
     cv::dilate(mask, next_to_object, cv::getStructuringElement(cv::MORPH_RECT, cv::Size(3, 3)));
     keep_groups_meeting(holes, next_to_object);
     const cv::Mat background = (d > 0) & around & ~mask;
-    colour_holes(rgb, mask, background, holes, out);
+    if (options.holes_from_colour && !rgb.empty()) colour_probability(rgb, mask, background, holes, out);
+    else out.setTo(0.5f, holes);
   }
   return out;
 }
@@ -317,43 +320,57 @@ cv::Mat derive_object_pixels_from_colour(const Camera& camera, const cv::Mat& rg
   if (!(options.margin > 0 && options.margin <= 1))
     throw std::invalid_argument("derive_object_pixels_from_colour: the margin must be in (0, 1] metres");
   cv::Mat covered_any = cv::Mat::zeros(size, CV_8U), covered_all(size, CV_8U, cv::Scalar(255));
+  std::vector<cv::Mat> covered_each;
   double z_near = std::numeric_limits<double>::infinity();
   for (const RenderImage& img : renders) {
     if (img.depth.size() != size || img.coverage.size() != size)
       throw std::invalid_argument("derive_object_pixels_from_colour: a render is not the camera's size");
     const cv::Mat covered = (img.coverage >= 0.5f) & (img.depth > 0.0f);
+    if (cv::countNonZero(covered) == 0) continue;  // a start off the image says nothing of the object's colours
     covered_any |= covered;
     covered_all &= covered;
-    if (cv::countNonZero(covered) == 0) continue;
+    covered_each.push_back(covered);
     cv::Mat masked = img.depth.clone();
     masked.setTo(std::numeric_limits<float>::infinity(), ~covered);
     double z = 0;
     cv::minMaxLoc(masked, &z);
     z_near = std::min(z_near, z);
   }
-  if (cv::countNonZero(covered_all) == 0) return cv::Mat();
+  if (covered_each.empty()) return cv::Mat();
   const int radius = pixels_at(camera, options.margin, z_near);
   // The core: deeper inside every render than the margin reaches, or the inner half where the object is thinner.
-  cv::Mat inside_distance;
-  cv::distanceTransform(covered_all, inside_distance, cv::DIST_L2, 3);
-  double deepest = 0;
-  cv::minMaxLoc(inside_distance, nullptr, &deepest);
-  const cv::Mat core = inside_distance >= std::min(double(radius), 0.5 * deepest);
+  // Starts that share no pixel (a detection beside a stale track): each one's own core; the histogram then mixes
+  // a wrong start's surroundings in, which only weakens the colours that tell them apart.
+  const auto core_of = [&](const cv::Mat& covered) {
+    cv::Mat inside_distance;
+    cv::distanceTransform(covered, inside_distance, cv::DIST_L2, 3);
+    double deepest = 0;
+    cv::minMaxLoc(inside_distance, nullptr, &deepest);
+    return cv::Mat(inside_distance >= std::max(1.0, std::min(double(radius), 0.5 * deepest)));
+  };
+  cv::Mat core;
+  if (cv::countNonZero(covered_all) > 0) {
+    core = core_of(covered_all);
+  } else {
+    core = cv::Mat::zeros(size, CV_8U);
+    for (const cv::Mat& covered : covered_each) core |= core_of(covered);
+  }
   const auto grown = [&](int r) {
     cv::Mat out;
     cv::dilate(covered_any, out, cv::getStructuringElement(cv::MORPH_ELLIPSE, cv::Size(2 * r + 1, 2 * r + 1)));
     return out;
   };
-  cv::Mat reach = grown(radius);
+  const cv::Mat reach_unbounded = grown(radius);
+  cv::Mat reach = reach_unbounded.clone();
   if (!options.bounds.empty()) {
     cv::Mat in_bounds = cv::Mat::zeros(size, CV_8U);
     in_bounds(options.bounds & cv::Rect(cv::Point(0, 0), size)).setTo(255);
     reach &= in_bounds;
   }
-  const cv::Mat ring = grown(2 * radius) & ~grown(radius);
+  const cv::Mat ring = grown(2 * radius) & ~reach_unbounded;
   if (cv::countNonZero(ring) == 0 || cv::countNonZero(core) == 0) return cv::Mat();
   cv::Mat out = cv::Mat::zeros(size, CV_32F);
-  colour_holes(rgb, core, ring, reach, out);
+  colour_probability(rgb, core, ring, reach, out);
   return out;
 }
 

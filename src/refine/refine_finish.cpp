@@ -242,6 +242,7 @@ void RefineRun::derive_pixels_at_result(Renderer& renderer, Candidate& c) {
   // The object's pixels about the chosen result, within what the verdict calls an inlier: the polish, the print
   // alignment, the Newton steps and the scores weigh them. Losses under other pixels do not compare: the result's
   // and the starts' again (a start no run beat stays the result).
+  res.loss_used.rgb_miss = loss_.rgb_miss;  // (from colour, the render's colour error on them)
   std::vector<LossValue> v;
   evaluate_fine(renderer, {res.pose}, loss_, Gradients::kSkip, v);
   res.loss = v[0];
@@ -402,7 +403,12 @@ RefineResult::ViewScores RefineRun::view_scores(const RenderImage& img, size_t v
       cv::Mat in_front = (obs.depth > 0) & (obs.depth < img.depth - loss_.occlusion_margin);
       visible = rendered & ~in_front;
     }
-    const cv::Mat observed_mask = obs.mask >= 0.5f;
+    cv::Mat observed_mask = obs.mask >= 0.5f;
+    if (mask_from_depth_[v] && obs.has_depth()) {  // a sensor's dropouts: neither the object's nor not
+      const cv::Mat reading = obs.depth > 0;
+      visible = visible & reading;
+      observed_mask = observed_mask & reading;
+    }
     const double inter = cv::countNonZero(visible & observed_mask), uni = cv::countNonZero(visible | observed_mask);
     scores.mask_iou = uni > 0 ? inter / uni : 0.0;
   }

@@ -181,6 +181,7 @@ void RefineRun::set_up_levels(const std::vector<RefineView>& views, const Observ
   switch_at_ = coarse_iterations(o);
   const bool given_mask = views.front().observed.has_mask();
   for (const RefineView& view : views) {
+    mask_from_depth_.push_back(view.mask_from_depth && view.observed.has_mask());
     fine_.push_back(make_level(view, o.image_scale, scaled_frame, Phase::kFine));
     if (given_mask && cv::countNonZero(fine_.back().obs.mask > 0) == 0)
       throw std::invalid_argument(views.size() > 1 ? "refine: the object mask of view " +
@@ -259,8 +260,9 @@ cv::Mat RefineRun::derived_pixels(Renderer& renderer, const std::vector<Pose>& p
   evaluations_ += long(poses.size());
   if (pixels_from_colour_) {
     const std::vector<RenderImage> renders = renderer.render(fine.cam, mesh(), poses, cv::Mat());
-    cv::Mat pixels = derive_object_pixels_from_colour(fine.cam, fine.obs.rgb, renders, po);
-    if (!pixels.empty()) colour_match_error_ = median_colour_error(fine.obs.rgb, renders.front(), pixels);
+    const cv::Mat pixels = derive_object_pixels_from_colour(fine.cam, fine.obs.rgb, renders, po);
+    if (pixels.empty() || cv::countNonZero(pixels >= 0.5f) == 0) return cv::Mat();
+    colour_match_error_ = median_colour_error(fine.obs.rgb, renders.front(), pixels);
     return pixels;
   }
   cv::Mat pixels = derive_object_pixels(fine.cam, fine.obs.depth, renderer.render(fine.cam, mesh(), poses, cv::Mat()),
@@ -283,6 +285,7 @@ bool RefineRun::derive_pixels(Renderer& renderer, const std::vector<Pose>& poses
 
 void RefineRun::use_pixels(const cv::Mat& pixels) {
   fine_.front().obs.mask = pixels;
+  mask_from_depth_.front() = !pixels_from_colour_ && !fine_.front().obs.has_rgb();
   if (!coarse_.empty()) {
     Level& coarse = coarse_.front();
     cv::resize(pixels, coarse.obs.mask, cv::Size(coarse.cam.width, coarse.cam.height), 0, 0, cv::INTER_AREA);
@@ -312,7 +315,8 @@ void RefineRun::update_object_pixels(Renderer& renderer) {
   } else if (derivations_ == 0) {
     ++derivations_;
     if (derive_pixels(renderer, initials_, std::max(reach, options_.inlier_threshold))) return;
-    // Nothing near the starts in depth: the window stays, and it is no observation of the silhouette.
+    // Nothing near the starts in depth (or no colour likely the object's): the window stays, and it is no
+    // observation of the silhouette.
     derives_pixels_ = has_mask_ = false;
     loss_.weight_mask = scan_loss_.weight_mask = res_.loss_used.weight_mask = 0;
   } else if (derivations_ == 1 && k_ == rederive_at_ && k_ > 0) {

@@ -74,7 +74,7 @@ class RefineRun {
     const Camera* camera = nullptr;  // this iteration's scale (coarse, then fine); view 0
     cv::Mat mask;                    // the object's observed mask at that scale (given, derived or the window)
   };
-  /// The next iteration's step. Without a mask but with depth (RefinerOptions::derive_mask) it first derives the
+  /// The next iteration's step. Without a mask (RefinerOptions::derive_mask) it first derives the
   /// object's pixels when they are due: about the starts before the first step and about the best runs when the
   /// fine phase begins (finish() derives them once more about the chosen result).
   Step next_step(Renderer& renderer);
@@ -133,14 +133,18 @@ class RefineRun {
   // again).
   bool derives_pixels_ = false;
   bool pixels_from_colour_ = false;
+  // Per view: the mask was derived from depth without colour (given so, or derived here without rgb): the IoU
+  // leaves the pixels without a depth reading out (its holes are unknown).
+  std::vector<bool> mask_from_depth_;
   double colour_match_error_ = NAN;
   bool weighs_given_mask_ = false;  // a mask was given and depth can check it (derive_mask, one view)
   int derivations_ = 0;
   int rederive_at_ = 0;
   int pixels_version_ = 0;  // counts use_pixels(): what a measurement at a pose was made under
   int bests_pixels_ = 0;    // pixels_version_ the runs' bests were measured under
-  /// derive_object_pixels() about `poses` within `margin` metres, at the fine scale and area-resized to the
-  /// coarse one; false (the masks unchanged) when no pixel was found.
+  /// derive_object_pixels() (without depth: derive_object_pixels_from_colour()) about `poses` within `margin`
+  /// metres, at the fine scale and area-resized to the coarse one; false (the masks unchanged) when no pixel was
+  /// found (none at least 0.5).
   bool derive_pixels(Renderer& renderer, const std::vector<Pose>& poses, double margin);
   cv::Mat derived_pixels(Renderer& renderer, const std::vector<Pose>& poses, double margin);  // empty: none
   void use_pixels(const cv::Mat& pixels);  // as the mask, at both scales

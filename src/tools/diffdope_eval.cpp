@@ -298,8 +298,8 @@ int main(int argc, char** argv) {
           try {
             mesh_ptr = &data.model(p.obj_id);
             obs = data.observation(img, gt->inst);
-            // One segmenter's mask per object and image, whatever the start.
             if (depth == "none") obs.depth = cv::Mat();
+            // One segmenter's mask per object and image, whatever the start.
             mask_iou_given = apply_mask_mode(obs, masks, coarse_seed * 0x9E3779B97F4A7C15ull +
                                                              uint64_t(scene) * 1000003ull + uint64_t(gt->inst));
           } catch (const std::exception& e) {

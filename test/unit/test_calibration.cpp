@@ -353,17 +353,54 @@ TEST(Calibration, TheDerivedMaskLeavesTheTableAndTheBoxBesideTheBaseOut) {
     Observation depth_only = c.observed;
     depth_only.mask = cv::Mat();
     const Mesh posed = merge_meshes(s.robot.posed_visuals(q), "arm");
+    const cv::Mat reading = c.observed.depth > 0;
     const auto iou = [&](const cv::Mat& derived) {  // over the pixels with a depth reading (holes say nothing)
-      const cv::Mat a = derived >= 0.5f, b = (c.observed.mask >= 0.5f) & (c.observed.depth > 0);
+      const cv::Mat a = (derived >= 0.5f) & reading, b = (c.observed.mask >= 0.5f) & reading;
       return double(cv::countNonZero(a & b)) / cv::countNonZero(a | b);
     };
-    const double at_truth = iou(calibrator.derive_mask(posed, s.cam, depth_only, s.truth, 0.02));
+    const cv::Mat at_the_truth = calibrator.derive_mask(posed, s.cam, depth_only, s.truth, 0.02);
+    const double at_truth = iou(at_the_truth);
+    // The robot's holes are unknown (0.5): neither the robot's nor not, so they count against no pose.
+    const cv::Mat robot_holes = (c.observed.mask >= 0.5f) & ~reading;
+    ASSERT_GT(cv::countNonZero(robot_holes), 0);
+    EXPECT_GT(cv::countNonZero((at_the_truth == 0.5f) & robot_holes), 0.9 * cv::countNonZero(robot_holes));
+    EXPECT_EQ(cv::countNonZero((at_the_truth == 0.5f) & reading), 0);
     const Pose guess = perturb_pose(s.truth, Eigen::Vector3d(0, 0, 0.35), 10 * M_PI / 180, 0.05, rng);
     const double at_guess = iou(calibrator.derive_mask(posed, s.cam, depth_only, guess, 0.08));
     std::printf("derived mask IoU: %.3f at the truth, %.3f at a guess 5 cm / 10 deg off\n", at_truth, at_guess);
     EXPECT_GT(at_truth, 0.97);
     EXPECT_GT(at_guess, 0.9);
   }
+}
+
+TEST(Calibration, ADerivedMasksHolesCountAgainstNoPose) {
+  // Depth only, a sensor with many dropouts: the mask derived at the truth knows nothing where there is no reading
+  // (0.5 there). Judged as derived from depth, those pixels are left out of the IoU and the truth scores as it
+  // should; taken as a given mask, the dropouts inside the robot would count as misses of the render.
+  ArmScene& s = setup();
+  std::mt19937_64 rng(23);
+  SyntheticNoise noise = RobotSceneOptions().noise;
+  noise.hole_fraction = 0.15;
+  const CalibrationCapture c =
+      capture(s.robot, random_configuration(s.generated, rng), s.cam, s.truth, 500, false, true, &noise);
+  const Mesh posed = merge_meshes(s.robot.posed_visuals(c.joint_positions), "arm");
+  Calibrator calibrator;
+  RefineView view{c.camera, c.observed, &posed};
+  view.observed.mask = calibrator.derive_mask(posed, c.camera, c.observed, s.truth, 0.02);
+  RefinerOptions o = CalibrationOptions().refiner;
+  o.iterations = 4;
+  const auto iou = [&](bool from_depth) {
+    RefineView v = view;
+    v.mask_from_depth = from_depth;
+    const RefineResult r = Refiner(o).refine_views({v}, {s.truth}, posed.center(), o);
+    EXPECT_TRUE(r.error.empty()) << r.error;
+    return r.mask_iou;
+  };
+  const double judged_as_derived = iou(true), as_given = iou(false);
+  std::printf("IoU at the truth, 15 %% dropouts: %.3f as derived from depth, %.3f as given\n", judged_as_derived,
+              as_given);
+  EXPECT_GT(judged_as_derived, 0.9);
+  EXPECT_GT(judged_as_derived, as_given + 0.02);
 }
 
 TEST(Calibration, OneCaptureIsPinnedDownLessFirmlyThanFour) {

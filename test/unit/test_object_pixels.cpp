@@ -279,3 +279,36 @@ TEST(ObjectPixels, FromColourAloneGoodStartsStayGood) {
   }
   EXPECT_LT(colour_sum, window_sum);
 }
+
+// The colours' weighing on a drawn image: the object red, its surroundings blue, a green patch in its reach that
+// neither region shows (an occluder, a highlight) is near a half, undecided; starts that share no pixel still
+// give the object's colours.
+TEST(ObjectPixels, FromColourAColourNeitherRegionShowsIsUndecided) {
+  const Camera cam(200, 200, 99.5, 99.5, 200, 200);
+  cv::Mat rgb(200, 200, CV_32FC3, cv::Scalar(0.1f, 0.2f, 0.9f));
+  rgb(cv::Rect(70, 70, 60, 60)).setTo(cv::Scalar(0.9f, 0.1f, 0.1f));
+  rgb(cv::Rect(132, 90, 6, 20)).setTo(cv::Scalar(0.1f, 0.9f, 0.2f));  // beside the object, inside its reach
+  const auto render_at = [&](const cv::Rect& r) {
+    RenderImage img;
+    img.roi = r;
+    img.coverage = cv::Mat::zeros(200, 200, CV_32F);
+    img.depth = cv::Mat::zeros(200, 200, CV_32F);
+    img.coverage(r).setTo(1.0);
+    img.depth(r).setTo(0.5);
+    return img;
+  };
+  ObjectPixelsOptions po;
+  po.margin = 0.025;  // 10 pixels at 0.5 m
+  const cv::Mat p = derive_object_pixels_from_colour(cam, rgb, {render_at(cv::Rect(72, 70, 60, 60))}, po);
+  ASSERT_FALSE(p.empty());
+  EXPECT_GT(p.at<float>(100, 100), 0.95f);  // the object
+  EXPECT_LT(p.at<float>(100, 65), 0.05f);   // its surroundings, in the reach
+  EXPECT_NEAR(p.at<float>(100, 134), 0.5f, 0.1f);  // green: neither
+  EXPECT_EQ(p.at<float>(100, 20), 0.0f);    // beyond the reach
+  // Two starts that share no pixel, one of them right: the object's colour is still the likelier.
+  const cv::Mat q = derive_object_pixels_from_colour(
+      cam, rgb, {render_at(cv::Rect(72, 70, 60, 60)), render_at(cv::Rect(5, 5, 30, 30))}, po);
+  ASSERT_FALSE(q.empty());
+  EXPECT_GT(q.at<float>(100, 100), 0.5f);
+  EXPECT_LT(q.at<float>(100, 65), 0.5f);
+}

@@ -643,7 +643,6 @@ TEST(Refiner, APlainModelGetsNoColourTermUnlessAskedAndTheResultSaysWhichTermsWe
   Observation rgb_alone = no_mask;
   rgb_alone.depth = cv::Mat();
   EXPECT_EQ(terms(plain, rgb_alone), (T{"rgb", "mask"}));  // the only evidence left, and the pixels it gives
-  window.derive_mask = false;
   EXPECT_EQ(used_terms(Refiner(window).refine(cam, rgb_alone, plain, truth).loss_used), (T{"rgb"}));
   // Nothing can judge that result (no mask, no depth, no print): its verdict is undetermined, and says why.
   const RefineResult unjudged = Refiner(o).refine(cam, rgb_alone, plain, truth);
