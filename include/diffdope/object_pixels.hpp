@@ -27,10 +27,13 @@ struct ObjectPixelsOptions {
   /// Where no depth reading says (holes at silhouettes, dark or shiny surfaces) within reach and the hole meets
   /// the object's pixels, the colour decides when an rgb image is given: the probability of the pixel's colour under the object's colour histogram (from
   /// the pixels depth gave it) against its surroundings' (the readings near it that are not the object), as
-  /// region-based trackers weigh colour (PWP3D). Without rgb, or with this off, such a hole is unknown: 0.5, which
-  /// the mask term weighs neither way and an IoU (>= 0.5) counts with the object, so that a sensor's dropouts do not
-  /// count against a right pose.
+  /// region-based trackers weigh colour (PWP3D). Without rgb, or with this off, such pixels are not the object's,
+  /// unless holes_unknown.
   bool holes_from_colour = false;
+  /// Where colour does not decide such a hole, it is unknown: 0.5, which the mask term weighs neither way, so that
+  /// a sensor's dropouts do not pull the silhouette (a calibration from depth alone; RefineView::mask_from_depth
+  /// then leaves them out of the IoU too).
+  bool holes_unknown = false;
   /// Where the object can be at all (a detector's box), in pixels; empty: anywhere.
   cv::Rect bounds;
 };

@@ -13,6 +13,7 @@ cv::Mat Calibrator::derive_mask(const Mesh& posed_robot, const Camera& camera, c
   // The robot at the estimate, full frame: what it covers and at what depth.
   ObjectPixelsOptions options;
   options.margin = margin;
+  options.holes_unknown = true;  // no colour here: the sensor's dropouts are neither the robot's nor not
   return derive_object_pixels(camera, observed.depth, renderer_->render(camera, posed_robot, {camera_from_mount}),
                               options);
 }

@@ -243,16 +243,16 @@ cv::Mat pixels_in_window(const Camera& camera, const cv::Mat& d, const std::vect
   if (options.touching_render) keep_groups_meeting(mask, covered_any);
   cv::Mat out;
   mask.convertTo(out, CV_32F, 1.0 / 255.0);
-  {
+  const bool by_colour = options.holes_from_colour && !rgb.empty();
+  if (by_colour || options.holes_unknown) {
     cv::Mat holes = ~(d > 0) & within_reach & inside_bounds;  // (NaN compares false: no reading)
     // Only holes that meet the object's pixels: a sensor's dropout blob elsewhere in the reach is not the object,
-    // whatever its colour. Where no colour decides, such a hole is unknown (0.5): the mask term weighs it
-    // neither way, and the IoU does not count the sensor's dropouts against a right pose.
+    // whatever its colour.
     cv::Mat next_to_object;
     cv::dilate(mask, next_to_object, cv::getStructuringElement(cv::MORPH_RECT, cv::Size(3, 3)));
     keep_groups_meeting(holes, next_to_object);
     const cv::Mat background = (d > 0) & around & ~mask;
-    if (options.holes_from_colour && !rgb.empty()) colour_probability(rgb, mask, background, holes, out);
+    if (by_colour) colour_probability(rgb, mask, background, holes, out);
     else out.setTo(0.5f, holes);
   }
   return out;

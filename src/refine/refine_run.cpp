@@ -285,7 +285,7 @@ bool RefineRun::derive_pixels(Renderer& renderer, const std::vector<Pose>& poses
 
 void RefineRun::use_pixels(const cv::Mat& pixels) {
   fine_.front().obs.mask = pixels;
-  mask_from_depth_.front() = !pixels_from_colour_ && !fine_.front().obs.has_rgb();
+  mask_from_depth_.front() = !pixels_from_colour_ && !fine_.front().obs.has_rgb();  // its holes: no evidence
   if (!coarse_.empty()) {
     Level& coarse = coarse_.front();
     cv::resize(pixels, coarse.obs.mask, cv::Size(coarse.cam.width, coarse.cam.height), 0, 0, cv::INTER_AREA);
