@@ -50,7 +50,8 @@ struct Args {
   std::cerr << "bench_tracking: " << why << "\n"
             << "usage: bench_tracking [--objects 1|2|3] [--frames N (90)] [--rate HZ (30)] [--every K (2)]\n"
                "                      [--detector-every K (3)] [--latency S (0.15)] [--masks given|none]\n"
-               "                      [--depth given|none] [--config FILE] [--seed S (1)] [--track-budget B,I (8,20)] [--quiet]\n";
+               "                      [--depth given|none] [--config FILE] [--seed S (1)] [--track-budget B,I (8,20)]\n"
+               "                      [--quiet]\n";
   std::exit(2);
 }
 

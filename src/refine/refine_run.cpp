@@ -278,7 +278,8 @@ bool RefineRun::derive_pixels(Renderer& renderer, const std::vector<Pose>& poses
   // pixels is: the colour term then neither grows the silhouette (a miss dearer than a match) nor shrinks it (a
   // miss free), and the pixels' probabilities decide it through the mask term.
   if (pixels_from_colour_ && std::isfinite(colour_match_error_))
-    loss_.rgb_miss = scan_loss_.rgb_miss = res_.loss_used.rgb_miss = std::min(colour_match_error_, options_.loss.rgb_miss);
+    loss_.rgb_miss = scan_loss_.rgb_miss = res_.loss_used.rgb_miss =
+        std::min(colour_match_error_, options_.loss.rgb_miss);
   use_pixels(pixels);
   return true;
 }

@@ -149,9 +149,9 @@ TEST(BagAccuracy, RefinedPosesTfAndScores) {
       EXPECT_EQ(s.plausible, s.count);
     } else {
       // RGB alone leaves the distance along the viewing ray looser (a few millimetres), but the track must not
-      // drift: every pose called plausible is within 2 cm and 5 degrees (and some are). The verdict may reject a pose the print
-      // no longer lines up with, but never a right one (within 1 cm and 5 degrees; a pose 9 mm but 16 degrees off
-      // is wrong, and rejecting it is right).
+      // drift: every pose called plausible is within 2 cm and 5 degrees (and some are). The verdict may reject a
+      // pose the print no longer lines up with, but never a right one (within 1 cm and 5 degrees; a pose 9 mm but
+      // 16 degrees off is wrong, and rejecting it is right).
       for (const auto& row : rec.checker->rows()) {
         if (row.name != o.name) continue;
         const bool right = row.refined.translation_m < 0.01 && row.refined.rotation_rad < 5 * M_PI / 180;

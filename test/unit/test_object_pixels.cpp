@@ -224,7 +224,8 @@ TEST(ObjectPixels, FromColourTheObjectIsLikelyAndItsSurroundingsNot) {
   // Nothing beyond the reach, nor outside a detector's box.
   EXPECT_EQ(cv::countNonZero(p(cv::Rect(0, 0, 20, 20))), 0);
   po.bounds = cv::Rect(0, 0, s.cam.width / 2, s.cam.height);
-  const cv::Mat bounded = derive_object_pixels_from_colour(s.cam, s.obs.rgb, renderer->render(s.cam, s.object, {start}), po);
+  const cv::Mat bounded =
+      derive_object_pixels_from_colour(s.cam, s.obs.rgb, renderer->render(s.cam, s.object, {start}), po);
   EXPECT_EQ(cv::countNonZero(bounded(cv::Rect(s.cam.width / 2, 0, s.cam.width / 2, s.cam.height)) > 0), 0);
   EXPECT_GT(cv::countNonZero(bounded > 0), 0);
 }

@@ -236,7 +236,8 @@ TEST(ToolsEndToEnd, EvalWithoutDepthRefinesFromColourAlone) {
                 " --scenes 1 --width 320 --height 240 --seed 9 2>/dev/null"), 0);
   const std::string pert = (tmp.path / "pert").string(), out = (tmp.path / "colour.jsonl").string();
   const std::string eval = std::string(DIFFDOPE_EVAL_EXE) + " --bop " + root + " --split test --perturbations " + pert;
-  ASSERT_EQ(run(eval + " --out " + out + " --generate 1 --seed 4 --levels easy --masks none --depth none > /dev/null 2>&1"), 0);
+  ASSERT_EQ(run(eval + " --out " + out +
+                " --generate 1 --seed 4 --levels easy --masks none --depth none > /dev/null 2>&1"), 0);
   std::ifstream in(out);
   int lines = 0;
   for (std::string line; std::getline(in, line); ++lines) {
