@@ -10,6 +10,7 @@
 #include <limits>
 #include <random>
 #include <stdexcept>
+#include <string>
 #include <vector>
 
 namespace diffdope {
@@ -92,6 +93,33 @@ void colour_probability(const cv::Mat& rgb, const cv::Mat& object, const cv::Mat
       const double pf = fg[b] / n_fg, pb = bg[b] / n_bg;
       out.at<float>(y, x) = float(pf / (pf + pb));
     }
+}
+
+/// What each render covers with a depth (a sliver at a silhouette says nothing of the object's depth range),
+/// their union, and the nearest depth they show (infinity when they cover nothing). `who` names the caller in
+/// the error thrown for a render that is not `size`.
+struct RenderCover {
+  std::vector<cv::Mat> covered;  // per render, CV_8U
+  cv::Mat any;
+  double z_near = std::numeric_limits<double>::infinity();
+};
+
+RenderCover render_cover(const std::vector<RenderImage>& renders, const cv::Size& size, const std::string& who) {
+  RenderCover out;
+  out.any = cv::Mat::zeros(size, CV_8U);
+  for (const RenderImage& img : renders) {
+    if (img.depth.size() != size || img.coverage.size() != size)
+      throw std::invalid_argument(who + ": a render is not the camera's size");
+    out.covered.push_back((img.coverage >= 0.5f) & (img.depth > 0.0f));
+    out.any |= out.covered.back();
+    if (cv::countNonZero(out.covered.back()) == 0) continue;
+    cv::Mat masked = img.depth.clone();
+    masked.setTo(std::numeric_limits<float>::infinity(), ~out.covered.back());
+    double z = 0;
+    cv::minMaxLoc(masked, &z);
+    out.z_near = std::min(out.z_near, z);
+  }
+  return out;
 }
 
 /// Keeps the 8-connected groups of nonzero `pixels` (CV_8U) that have a pixel where `where` is nonzero.
@@ -271,22 +299,10 @@ cv::Mat derive_object_pixels(const Camera& camera, const cv::Mat& d, const std::
     throw std::invalid_argument("derive_object_pixels: the rgb image is not CV_32FC3 of the camera's size");
   if (!(options.surface_search >= 0 && options.surface_search <= 1))
     throw std::invalid_argument("derive_object_pixels: surface_search must be in [0, 1] metres");
-  // What each render covers with a depth (a sliver at a silhouette says nothing of the object's depth range).
-  std::vector<cv::Mat> covered;
-  cv::Mat covered_any = cv::Mat::zeros(size, CV_8U);
-  double z_near = std::numeric_limits<double>::infinity();
-  for (const RenderImage& img : renders) {
-    if (img.depth.size() != size || img.coverage.size() != size)
-      throw std::invalid_argument("derive_object_pixels: a render is not the camera's size");
-    covered.push_back((img.coverage >= 0.5f) & (img.depth > 0.0f));
-    covered_any |= covered.back();
-    if (cv::countNonZero(covered.back()) == 0) continue;
-    cv::Mat masked = img.depth.clone();
-    masked.setTo(std::numeric_limits<float>::infinity(), ~covered.back());
-    double z = 0;
-    cv::minMaxLoc(masked, &z);
-    z_near = std::min(z_near, z);
-  }
+  const RenderCover cover = render_cover(renders, size, "derive_object_pixels");
+  const std::vector<cv::Mat>& covered = cover.covered;
+  const cv::Mat& covered_any = cover.any;
+  const double z_near = cover.z_near;
   if (cv::countNonZero(covered_any) == 0) return cv::Mat::zeros(size, CV_32F);
 
   // Only the object's surroundings are searched (its reach and the surfaces around it): the rest of the image
@@ -319,25 +335,17 @@ cv::Mat derive_object_pixels_from_colour(const Camera& camera, const cv::Mat& rg
     throw std::invalid_argument("derive_object_pixels_from_colour: the rgb image is not CV_32FC3 of the camera's size");
   if (!(options.margin > 0 && options.margin <= 1))
     throw std::invalid_argument("derive_object_pixels_from_colour: the margin must be in (0, 1] metres");
-  cv::Mat covered_any = cv::Mat::zeros(size, CV_8U), covered_all(size, CV_8U, cv::Scalar(255));
+  const RenderCover cover = render_cover(renders, size, "derive_object_pixels_from_colour");
+  const cv::Mat& covered_any = cover.any;
+  cv::Mat covered_all(size, CV_8U, cv::Scalar(255));
   std::vector<cv::Mat> covered_each;
-  double z_near = std::numeric_limits<double>::infinity();
-  for (const RenderImage& img : renders) {
-    if (img.depth.size() != size || img.coverage.size() != size)
-      throw std::invalid_argument("derive_object_pixels_from_colour: a render is not the camera's size");
-    const cv::Mat covered = (img.coverage >= 0.5f) & (img.depth > 0.0f);
+  for (const cv::Mat& covered : cover.covered) {
     if (cv::countNonZero(covered) == 0) continue;  // a start off the image says nothing of the object's colours
-    covered_any |= covered;
     covered_all &= covered;
     covered_each.push_back(covered);
-    cv::Mat masked = img.depth.clone();
-    masked.setTo(std::numeric_limits<float>::infinity(), ~covered);
-    double z = 0;
-    cv::minMaxLoc(masked, &z);
-    z_near = std::min(z_near, z);
   }
   if (covered_each.empty()) return cv::Mat();
-  const int radius = pixels_at(camera, options.margin, z_near);
+  const int radius = pixels_at(camera, options.margin, cover.z_near);
   // The core: deeper inside every render than the margin reaches, or the inner half where the object is thinner.
   // Starts that share no pixel (a detection beside a stale track): each one's own core; the histogram then mixes
   // a wrong start's surroundings in, which only weakens the colours that tell them apart.

@@ -136,7 +136,7 @@ class RefineRun {
   // Per view: the mask was derived from depth without colour (given so, or derived here without rgb): the IoU
   // leaves the pixels without a depth reading out (its holes are unknown).
   std::vector<bool> mask_from_depth_;
-  double colour_match_error_ = NAN;
+  double colour_match_error_ = NAN;  // from colour: the last derivation's median colour error, its miss cost
   bool weighs_given_mask_ = false;  // a mask was given and depth can check it (derive_mask, one view)
   int derivations_ = 0;
   int rederive_at_ = 0;
