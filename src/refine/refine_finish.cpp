@@ -36,13 +36,15 @@ double RefineRun::print_significance(Renderer& renderer, const Pose& pose) {
 
 double jump_margin(double angle) { return kJumpMargin * (1.0 + 4.0 * std::abs(angle) / M_PI); }
 
-bool jump_is_supported(const JumpEvidence& from, const JumpEvidence& to, double angle, bool weigh_print) {
+bool jump_is_supported(const JumpEvidence& from, const JumpEvidence& to, double angle, double min_print_significance) {
   if (!(to.loss < from.loss)) return false;
+  const bool weigh_print = min_print_significance > 0;
   if (weigh_print && std::isfinite(from.print) && !std::isfinite(to.print)) return false;  // the print is lost
   const bool weighed = weigh_print && std::isfinite(from.print) && std::isfinite(to.print);
   if (weighed && to.print < from.print - kPrintContradiction) return false;
   const double need = print_jump_bar(angle);
   if (weighed && to.print >= need && to.print - std::max(from.print, 0.0) >= need) return true;
+  if (weighed && to.print < min_print_significance) return false;
   return to.loss < (1.0 - jump_margin(angle)) * from.loss;
 }
 
@@ -298,7 +300,7 @@ void RefineRun::weigh_candidate(Renderer& renderer, Candidate& c) {
   } else if (std::isfinite(res.loss.total) && candidate_loss < res.loss.total) {
     const JumpEvidence basin{res.loss.total, c.print(renderer)};
     const JumpEvidence jump{candidate_loss, print_significance(renderer, best_pose_[size_t(candidate)])};
-    if (jump_is_supported(basin, jump, jump_angle_[size_t(candidate)], options_.min_print_significance > 0)) {
+    if (jump_is_supported(basin, jump, jump_angle_[size_t(candidate)], options_.min_print_significance)) {
       take(res, candidate);
       res.scan_taken = true;
       c.set_print(jump.print);

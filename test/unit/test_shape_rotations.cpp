@@ -388,7 +388,7 @@ TEST(Refiner, AFlipThePrintContradictsIsNotTakenFromAGoodStart) {
 
 TEST(JumpEvidence, AJumpNeedsALowerLossAndEvidenceThatGrowsWithItsAngle) {
   const double quarter = M_PI / 2, half = M_PI, none = std::nan("");
-  const bool weigh = true;
+  const double weigh = 1.0;  // min_print_significance
   // Never without a lower loss, whatever the print says.
   EXPECT_FALSE(jump_is_supported({0.30, 0.0}, {0.30, 20.0}, quarter, weigh));
   // The print contradicts (a flipped label: 13 sigma at the start's basin, none at the flip): a 2 % lower loss
@@ -409,7 +409,12 @@ TEST(JumpEvidence, AJumpNeedsALowerLossAndEvidenceThatGrowsWithItsAngle) {
   EXPECT_FALSE(jump_is_supported({0.30, none}, {0.288, none}, half, weigh));  // 4 %: not enough for half a turn
   EXPECT_TRUE(jump_is_supported({0.30, none}, {0.28, none}, half, weigh));    // 6.7 %
   // The print not weighed (min_print_significance 0): the loss alone.
-  EXPECT_TRUE(jump_is_supported({0.2525, 13.2}, {0.2, 0.2}, half, false));
+  EXPECT_TRUE(jump_is_supported({0.2525, 13.2}, {0.2, 0.2}, half, 0.0));
+  // A lower loss alone never jumps to a candidate whose print does not register: a real camera's mustard bottle,
+  // its colour 3 px off its depth, registers at -0.7 sigma at the truth and -1.6 at half a turn, 7 % lower.
+  EXPECT_FALSE(jump_is_supported({0.30, -0.7}, {0.279, -1.6}, half, weigh));
+  EXPECT_FALSE(jump_is_supported({0.30, 0.5}, {0.20, 0.9}, M_PI / 6, weigh));
+  EXPECT_TRUE(jump_is_supported({0.30, 0.5}, {0.20, 0.9}, M_PI / 6, 0.5));
 }
 
 TEST(JumpEvidence, APrintTurnIsRefusedWhereTheRegistrationFallsOrDoesNotRegister) {
