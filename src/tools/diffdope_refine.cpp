@@ -238,6 +238,8 @@ nlohmann::ordered_json pose_json(const RefineResult& r) {
               {"plausible", r.plausible},
               {"judged", r.judged},
               {"retried", r.retried},
+              {"given_mask_replaced", r.given_mask_replaced},
+              {"given_mask_offset", r.given_mask_offset},
               {"confidence", r.confidence},
               {"print_significance", std::isfinite(r.print.significance()) ? nlohmann::json(r.print.significance())
                                                                            : nlohmann::json(nullptr)},

@@ -35,6 +35,8 @@ diffdope_ros::RefinedPose refined_pose_msg(const diffdope::RefineResult& r, cons
   }
   p.error = diffdope::undetermined_reason(r);
   p.terms = diffdope::used_terms(r.loss_used);
+  p.given_mask_replaced = r.given_mask_replaced;
+  p.given_mask_offset = r.given_mask_offset;
   p.retried = r.retried;
   p.iterations = r.iterations;
   p.time_ms = r.time_ms;
