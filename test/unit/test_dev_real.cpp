@@ -16,6 +16,12 @@ namespace {
 const fs::path kDevReal = fs::path(DIFFDOPE_SOURCE_DIR) / ".." / "shared" / "data" / "dev_real";
 const char* const kScene = "000102";
 
+struct TempDir {
+  fs::path path;
+  explicit TempDir(const std::string& name) : path(fs::temp_directory_path() / name) { fs::create_directories(path); }
+  ~TempDir() { fs::remove_all(path); }
+};
+
 }  // namespace
 
 class DevReal : public ::testing::TestWithParam<const char*> {};
@@ -26,7 +32,8 @@ class DevReal : public ::testing::TestWithParam<const char*> {};
 TEST_P(DevReal, NoEasyOrTrackedStartEndsFar) {
   if (!fs::is_directory(kDevReal / "test" / kScene))
     GTEST_SKIP() << kDevReal.string() << " is not here: the real frames are not checked";
-  const fs::path tmp = fs::temp_directory_path() / ("diffdope_dev_real_" + std::to_string(::getpid()) + GetParam());
+  const TempDir dir("diffdope_dev_real_" + std::to_string(::getpid()) + GetParam());
+  const fs::path& tmp = dir.path;
   fs::create_directories(tmp / "perturbations" / kScene);
   for (const char* f : {"scene_error_deg_001_trans_001.json", "tracking.json"})
     fs::copy_file(kDevReal / "perturbations" / kScene / f, tmp / "perturbations" / kScene / f);
@@ -45,7 +52,6 @@ TEST_P(DevReal, NoEasyOrTrackedStartEndsFar) {
         << r["error_init_mm"] << " mm";
   }
   EXPECT_EQ(results, 3 * 2 + 3);  // three objects: two easy starts each, one tracked
-  fs::remove_all(tmp);
 }
 
 INSTANTIATE_TEST_SUITE_P(MaskModes, DevReal, ::testing::Values("given", "none", "box"),
