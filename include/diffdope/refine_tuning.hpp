@@ -61,6 +61,10 @@ constexpr double kPrintContradiction = 1.0;
 /// The relative loss gain a candidate needs without clear print evidence, for a small turn; it grows with the
 /// turn's angle (jump_margin()): the detector's pose is a prior, not noise.
 constexpr double kJumpMargin = 0.01;
+/// Beyond a quarter turn the loss alone never justifies a jump, only the print: a turn that swaps the object's
+/// ends or faces swaps where the light falls on it, and the flat colour term's difference then measures the
+/// lighting (a can lit from one end fits 51 % better flipped), not the pose.
+constexpr double kLossJumpMaxAngle = M_PI / 2;
 
 // ---- The object's pixels without a mask ------------------------------------------------------------------------
 

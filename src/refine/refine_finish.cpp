@@ -45,6 +45,7 @@ bool jump_is_supported(const JumpEvidence& from, const JumpEvidence& to, double 
   const double need = print_jump_bar(angle);
   if (weighed && to.print >= need && to.print - std::max(from.print, 0.0) >= need) return true;
   if (weighed && to.print < min_print_significance) return false;
+  if (std::abs(angle) > kLossJumpMaxAngle) return false;
   return to.loss < (1.0 - jump_margin(angle)) * from.loss;
 }
 

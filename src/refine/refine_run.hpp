@@ -23,10 +23,11 @@ double jump_margin(double angle);
 /// print measured at both (and weighed: RefinerOptions::min_print_significance > 0): never when it contradicts
 /// the jump (kPrintContradiction); always when it registers at the candidate, and by that much more than at the
 /// basin, at least kClearPrint * (1 + angle / pi) standard deviations (half a turn needs twice the evidence of a
-/// small one). Otherwise the loss decides, lower by more than jump_margin(angle), and only to a candidate whose
-/// print registers (at least `min_print_significance`): a pose the verdict would reject for its print is no
-/// better supported than the start's basin, whatever the loss says (on a camera's images a lit, slightly
-/// misregistered print fits a turned flat render by a few percent of loss). A print measured at the basin but not
+/// small one). Otherwise the loss decides, lower by more than jump_margin(angle), for turns of at most
+/// kLossJumpMaxAngle, and only to a candidate whose print registers (at least `min_print_significance`): a pose
+/// the verdict would reject for its print is no better supported than the start's basin, whatever the loss says
+/// (on a camera's images a lit, slightly misregistered print fits a turned flat render by a few percent of loss).
+/// A print measured at the basin but not
 /// at the candidate (it left the view, or no longer has contrast) is lost evidence: no jump.
 /// min_print_significance <= 0: the print is not weighed.
 bool jump_is_supported(const JumpEvidence& from, const JumpEvidence& to, double angle, double min_print_significance);
