@@ -16,7 +16,8 @@ namespace diffdope {
 struct JumpEvidence {
   double loss = 0, print = 0;
 };
-/// kJumpMargin * (1 + 4 * angle / pi): 1.7 % for a 30-degree turn, 3 % for a quarter turn, 5 % for a half turn.
+/// kJumpMargin * (1 + 4 * angle / pi): 1.7 % for a 30-degree turn, 3 % for a quarter turn (beyond it the loss
+/// alone never jumps: kLossJumpMaxAngle).
 double jump_margin(double angle);
 /// Whether the evidence supports a jump from the start's basin (`from`) to a shape-scan candidate (`to`),
 /// turned `angle` radians from the run it came from, both converged. Never without a lower loss. With the
@@ -27,8 +28,8 @@ double jump_margin(double angle);
 /// kLossJumpMaxAngle, and only to a candidate whose print registers (at least `min_print_significance`): a pose
 /// the verdict would reject for its print is no better supported than the start's basin, whatever the loss says
 /// (on a camera's images a lit, slightly misregistered print fits a turned flat render by a few percent of loss).
-/// A print measured at the basin but not
-/// at the candidate (it left the view, or no longer has contrast) is lost evidence: no jump.
+/// A print measured at the basin but not at the candidate (it left the view, or no longer has contrast) is lost
+/// evidence: no jump.
 /// min_print_significance <= 0: the print is not weighed.
 bool jump_is_supported(const JumpEvidence& from, const JumpEvidence& to, double angle, double min_print_significance);
 /// Whether the print's registration allows the print alignment's turn from a pose whose print significance is
