@@ -2,6 +2,7 @@
 // How well a given object mask (a segmenter's) agrees with the object's pixels that depth and colour show
 // (derive_object_pixels()): what the refiner measures to decide whether a mask's outline can be taken as given.
 #include "diffdope/refine_tuning.hpp"
+#include <limits>
 #include <opencv2/core.hpp>
 
 namespace diffdope {
@@ -19,5 +20,19 @@ namespace diffdope {
 /// silhouettes) the reference's edge is a guess. Returns NaN when no outline pixel counts, infinity when the
 /// reference has no outline. Throws std::invalid_argument when the images differ in size or type.
 double outline_offset(const cv::Mat& mask, const cv::Mat& reference, const cv::Mat& depth = cv::Mat());
+
+/// A translation of a mask (pixels; +x right, +y down) and the outline_offset() left after it.
+struct OutlineShift {
+  double dx = 0, dy = 0;
+  double offset = std::numeric_limits<double>::quiet_NaN();  // NaN: no outline pixel counted at any shift
+};
+
+/// The whole-pixel translation of `mask`, at most `max_shift` pixels long, that lays its outline nearest to the
+/// outline of `reference` (outline_offset() without depth of the moved mask), and the offset left; of equal
+/// offsets the shortest shift. A mask off the image as a whole shows as a shift with little offset left: a
+/// segmenter run on a colour image that is not registered to depth, or a label drawn from a pose that is off the
+/// image. A mask grown, shrunk or wandering keeps its offset at every shift. Throws std::invalid_argument when the
+/// images differ in size or channels, or max_shift < 0.
+OutlineShift best_outline_shift(const cv::Mat& mask, const cv::Mat& reference, int max_shift);
 
 }  // namespace diffdope

@@ -76,6 +76,10 @@ constexpr double kDerivedMaskWeight = 0.5;
 /// the edge depth shows (outline_offset()): what rounding an outline to that grid leaves. Beyond it the derived
 /// pixels replace the mask (derive_mask).
 constexpr double kTrustedOutlineOffset = 0.5;
+/// How far (camera pixels) a given mask's translation onto the edge depth shows is sought (best_outline_shift(),
+/// reported, not acted on): a colour camera misregistered to depth, or a label drawn from a pose off the image,
+/// puts a mask a few pixels off as a whole (3-7 px on a real RGB-D camera's frames, docs/benchmarks.md).
+constexpr double kMaxMaskShift = 8.0;
 /// A pixel of a mask's outline counts at most this far (pixels) from the reference's: a blob, or a stretch of
 /// outline the depth cannot see (a dark or shiny edge, the foot on a table), weighs no more than a clear miss.
 constexpr double kOutlineOffsetCap = 3.0;

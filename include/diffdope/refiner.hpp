@@ -269,6 +269,12 @@ struct RefineResult {
                                       // (no mask, no depth, several views, derive_mask false)
   bool given_mask_replaced = false;   // that offset exceeded half a pixel: the derived pixels stood in for the
                                       // mask in the loss, the later steps and the verdict
+  std::array<double, 2> given_mask_shift{{0, 0}};  // camera pixels (+x right, +y down): the translation that
+                                      // lays the given mask's outline nearest to that edge (best_outline_shift(), up
+                                      // to kMaxMaskShift); a mask off the image as a whole shows here (a colour
+                                      // image not registered to depth, a label drawn from a pose off the image)
+  double given_mask_shifted_offset = -1;  // pixels at the refining scale: the offset left after that shift; near
+                                      // given_mask_offset for a grown, shrunk or wandering mask; -1 when not measured
   double depth_inliers = -1;          // fraction of object pixels (observed or derived mask, else the render's) with a depth
                                       // reading within the noise's band of the render (depth_agreement()); -1
                                       // without depth

@@ -304,6 +304,15 @@ void RefineRun::update_object_pixels(Renderer& renderer) {
     const cv::Mat pixels = derived_pixels(renderer, initials_, std::max(reach, options_.inlier_threshold));
     const double offset = pixels.empty() ? NAN : outline_offset(fine_.front().obs.mask, pixels);
     if (!std::isnan(offset)) res_.given_mask_offset = offset;
+    if (!pixels.empty()) {
+      const double scale = options_.image_scale;
+      const OutlineShift shift =
+          best_outline_shift(fine_.front().obs.mask, pixels, int(std::ceil(kMaxMaskShift * scale)));
+      if (!std::isnan(shift.offset)) {
+        res_.given_mask_shift = {shift.dx / scale, shift.dy / scale};
+        res_.given_mask_shifted_offset = shift.offset;
+      }
+    }
     if (!(offset > kTrustedOutlineOffset)) {
       derives_pixels_ = false;
       return;

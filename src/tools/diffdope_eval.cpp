@@ -233,6 +233,8 @@ int main(int argc, char** argv) {
 
     std::vector<double> given_ious;  // --masks coarse: per result, the mask given against the visible one
     int masks_checked = 0, masks_replaced = 0;  // given masks checked against depth, and replaced by its pixels
+    // Per object, of the given masks checked: their shift onto depth's edge (camera px), offset before and after.
+    std::map<int, std::vector<std::array<double, 4>>> mask_shifts;
     // Where the evaluations went: per stage, the sum and the most one refinement made (retried results, which
     // hold two refinements' counts, are left out of the most).
     std::array<double, kRefineStages> stage_sum{};
@@ -366,7 +368,12 @@ int main(int argc, char** argv) {
           line["given_mask_offset"] = r.given_mask_offset;
           line["given_mask_replaced"] = r.given_mask_replaced;
           if (masks == "coarse") given_ious.push_back(mask_iou_given);
+          line["given_mask_shift"] = r.given_mask_shift;
+          line["given_mask_shifted_offset"] = r.given_mask_shifted_offset;
           masks_checked += r.given_mask_offset >= 0, masks_replaced += r.given_mask_replaced;
+          if (r.given_mask_shifted_offset >= 0)
+            mask_shifts[p.obj_id].push_back({r.given_mask_shift[0], r.given_mask_shift[1], r.given_mask_offset,
+                                              r.given_mask_shifted_offset});
           line["print"] = {{"ncc", r.print.ncc}, {"best_ncc", r.print.best_ncc}, {"best_dx", r.print.best_dx},
                            {"best_dy", r.print.best_dy}, {"far_mean", r.print.far_mean}, {"far_std", r.print.far_std},
                            {"pixels", r.print.pixels}, {"render_contrast", r.print.render_contrast}};
@@ -440,6 +447,21 @@ int main(int argc, char** argv) {
     if (masks_checked > 0) {
       std::printf("masks given: %d of %d checked against depth replaced by its pixels\n", masks_replaced, masks_checked);
       summary["given_masks"] = {{"checked", masks_checked}, {"replaced", masks_replaced}};
+      // A mask off the image as a whole (misregistered colour, labels from poses off the image) shows as a
+      // shift that leaves little offset; a segmenter's coarse outline keeps its offset.
+      for (auto& [obj, rows] : mask_shifts) {
+        std::array<double, 4> mid{};
+        for (size_t k = 0; k < mid.size(); ++k) {
+          std::vector<double> v;
+          for (const auto& r : rows) v.push_back(r[k]);
+          std::nth_element(v.begin(), v.begin() + long(v.size() / 2), v.end());
+          mid[k] = v[v.size() / 2];
+        }
+        std::printf("  obj %d: median shift onto depth's edge (%+.0f, %+.0f) camera px; outline offset %.2f, %.2f "
+                    "after the shift (refining px)\n", obj, mid[0], mid[1], mid[2], mid[3]);
+        summary["given_masks"]["objects"][std::to_string(obj)] = {
+            {"median_shift_px", {mid[0], mid[1]}}, {"median_offset", mid[2]}, {"median_shifted_offset", mid[3]}};
+      }
     }
     if (stage_results > 0) {
       std::printf("evaluations by stage, mean per object (retries included) / most in one refinement / planned:");

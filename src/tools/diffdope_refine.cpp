@@ -240,6 +240,8 @@ nlohmann::ordered_json pose_json(const RefineResult& r) {
               {"retried", r.retried},
               {"given_mask_replaced", r.given_mask_replaced},
               {"given_mask_offset", r.given_mask_offset},
+              {"given_mask_shift", r.given_mask_shift},
+              {"given_mask_shifted_offset", r.given_mask_shifted_offset},
               {"confidence", r.confidence},
               {"print_significance", std::isfinite(r.print.significance()) ? nlohmann::json(r.print.significance())
                                                                            : nlohmann::json(nullptr)},

@@ -1,5 +1,5 @@
 // outline_offset(): how far a given mask's outline lies from a reference's (the pixels depth shows), the measure
-// by which the refiner takes a segmenter's mask as given or replaces it.
+// by which the refiner takes a segmenter's mask as given or replaces it; best_outline_shift(): a mask off as a whole.
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -86,4 +86,42 @@ TEST(MaskAgreement, OnlyWhereDepthReadsAroundTheOutline) {
   EXPECT_GT(outline_offset(given, exact), 0.8);
   depth(cv::Rect(82, 0, 78, 120)).setTo(0);
   EXPECT_LT(outline_offset(given, exact, depth), 0.1);
+}
+
+// best_outline_shift(): a mask off the image as a whole is found as a shift; a grown one is not.
+TEST(MaskAgreement, AMaskOffAsAWholeIsFoundAsAShift) {
+  const cv::Mat exact = ellipse_mask();
+  cv::Mat off;
+  cv::warpAffine(exact, off, cv::Matx23d(1, 0, 3, 0, 1, -2), exact.size(), cv::INTER_NEAREST);  // 3 right, 2 up
+  EXPECT_GT(outline_offset(off, exact), 1.0);
+  const OutlineShift s = best_outline_shift(off, exact, 4);
+  EXPECT_DOUBLE_EQ(s.dx, -3.0);  // the shift that lays it back
+  EXPECT_DOUBLE_EQ(s.dy, 2.0);
+  EXPECT_DOUBLE_EQ(s.offset, 0.0);
+  // Beyond max_shift it is not found, and the offset left says so.
+  EXPECT_GT(best_outline_shift(off, exact, 2).offset, 0.5);
+  // An exact mask needs no shift: of equal offsets the shortest wins.
+  const OutlineShift none = best_outline_shift(exact, exact, 4);
+  EXPECT_DOUBLE_EQ(none.dx, 0.0);
+  EXPECT_DOUBLE_EQ(none.dy, 0.0);
+  EXPECT_DOUBLE_EQ(none.offset, 0.0);
+}
+
+TEST(MaskAgreement, AGrownMaskKeepsMostOfItsOffsetAtEveryShift) {
+  // A shift lays one side of a grown outline on the edge only by moving the other side away (to the cap).
+  const cv::Mat exact = ellipse_mask();
+  for (int k : {2, 3}) {  // (grown by one, its outline is depth's straddling pixel: 0)
+    const cv::Mat grown = moved(exact, k);
+    const OutlineShift s = best_outline_shift(grown, exact, 4);
+    EXPECT_GT(s.offset, 0.6 * outline_offset(grown, exact)) << "grown by " << k;
+    EXPECT_GT(s.offset, 0.4 * k) << "grown by " << k;
+  }
+}
+
+TEST(MaskAgreement, AShiftOfNothingOrMismatchedImages) {
+  const cv::Mat exact = ellipse_mask();
+  EXPECT_TRUE(std::isnan(best_outline_shift(cv::Mat::zeros(120, 160, CV_32F), exact, 3).offset));
+  EXPECT_TRUE(std::isnan(best_outline_shift(exact, cv::Mat::zeros(120, 160, CV_32F), 3).offset));
+  EXPECT_THROW(best_outline_shift(exact, cv::Mat::zeros(60, 80, CV_32F), 3), std::invalid_argument);
+  EXPECT_THROW(best_outline_shift(exact, exact, -1), std::invalid_argument);
 }

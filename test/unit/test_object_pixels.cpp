@@ -313,3 +313,32 @@ TEST(ObjectPixels, FromColourAColourNeitherRegionShowsIsUndecided) {
   EXPECT_GT(q.at<float>(100, 100), 0.5f);
   EXPECT_LT(q.at<float>(100, 65), 0.5f);
 }
+
+// A mask off the image as a whole (drawn on a colour image not registered to depth) is reported with the shift,
+// in camera pixels at any refining scale, that lays it on depth's edge; an exact mask needs none.
+TEST(ObjectPixels, AMaskOffAsAWholeReportsItsShift) {
+  const ClutteredScene s = make_cluttered_scene(5);
+  const cv::Mat exact = s.scene.visible_masks[0];
+  cv::Mat moved;
+  cv::warpAffine(exact, moved, cv::Matx23d(1, 0, 4, 0, 1, 0), exact.size(), cv::INTER_NEAREST);  // 4 px right
+  for (const double scale : {1.0, 0.5}) {
+    RefinerOptions o = test_options();
+    o.image_scale = scale;
+    o.iterations = 8;  // the shift is measured before the first step
+    Observation given = s.obs;
+    given.mask = exact;
+    const RefineResult e = Refiner(o).refine(s.cam, given, s.object, s.truth);
+    EXPECT_DOUBLE_EQ(e.given_mask_shift[0], 0.0) << "scale " << scale;
+    EXPECT_DOUBLE_EQ(e.given_mask_shift[1], 0.0) << "scale " << scale;
+    EXPECT_LE(e.given_mask_shifted_offset, e.given_mask_offset) << "scale " << scale;
+    given.mask = moved;
+    const RefineResult m = Refiner(o).refine(s.cam, given, s.object, s.truth);
+    EXPECT_NEAR(m.given_mask_shift[0], -4.0, 1.0 / scale) << "scale " << scale;
+    EXPECT_NEAR(m.given_mask_shift[1], 0.0, 1.0 / scale) << "scale " << scale;
+    EXPECT_LT(m.given_mask_shifted_offset, 0.5 * m.given_mask_offset) << "scale " << scale;
+    RefinerOptions as_given = o;
+    as_given.derive_mask = false;
+    const RefineResult t = Refiner(as_given).refine(s.cam, given, s.object, s.truth);
+    EXPECT_EQ(t.given_mask_shifted_offset, -1.0);
+  }
+}

@@ -198,7 +198,8 @@ class RefineCliTest : public ::testing::Test {
     ASSERT_NO_THROW(j = json::parse(read_text(out / "pose.json")));
     for (const char* key : {"R", "t", "quaternion_xyzw", "matrix", "loss", "loss_terms", "initial_loss", "iterations",
                             "time_ms", "mask_iou", "depth_inliers", "converged", "plausible", "winner",
-                            "learning_rate", "given_mask_replaced", "given_mask_offset"})
+                            "learning_rate", "given_mask_replaced", "given_mask_offset", "given_mask_shift",
+                            "given_mask_shifted_offset"})
       EXPECT_TRUE(j.contains(key)) << key;
     const auto R = j.at("R").get<std::vector<double>>();
     const auto t = j.at("t").get<std::vector<double>>();

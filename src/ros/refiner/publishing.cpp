@@ -37,6 +37,7 @@ diffdope_ros::RefinedPose refined_pose_msg(const diffdope::RefineResult& r, cons
   p.terms = diffdope::used_terms(r.loss_used);
   p.given_mask_replaced = r.given_mask_replaced;
   p.given_mask_offset = r.given_mask_offset;
+  p.given_mask_shift = {r.given_mask_shift[0], r.given_mask_shift[1]};
   p.retried = r.retried;
   p.iterations = r.iterations;
   p.time_ms = r.time_ms;
