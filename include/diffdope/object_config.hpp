@@ -18,11 +18,14 @@
 //         translation: [0, 0, 0]            # metres
 //         rotation: [0, 0, 0, 1]            # quaternion x y z w
 //
-// Or DOPE's own config_pose.yaml, as it is: an object per entry of its `meshes` (file:// or package://), scaled by
-// its `mesh_scales`, with its `class_ids` and the pose topic /<topic_publishing>/pose_<name>. DOPE turns the pose
-// it publishes by its `model_transforms` itself, so the published pose is the mesh's and none applies here.
+// Or DOPE's own config_pose.yaml, as it is: an object per class with both `weights` (what DOPE detects) and
+// `meshes` (file:// or package://), scaled by its `mesh_scales`, with its `class_ids` and the pose topic
+// /<topic_publishing>/pose_<name>. DOPE turns the pose it publishes by its `model_transforms` itself, so the
+// published pose is the mesh's and none applies here; they and DOPE's `dimensions` serve the mesh's check
+// (cuboid_mismatch()).
 #include <cstdint>
 #include <functional>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -45,11 +48,21 @@ struct ObjectConfig {
   static constexpr int kMaxInstances = 32;  // (InstanceTracks::kMaxInstances)
   int64_t class_id = -1;   // DOPE's class id in its Detection3DArray; -1: none (the node's ~class_ids may give it)
   Pose model_transform;    // mesh frame -> object (detector) frame; identity by default
+  /// The detector's cuboid (DOPE's `dimensions`), metres along the cuboid's own axes; zero: not given.
+  Eigen::Vector3d cuboid_extent = Eigen::Vector3d::Zero();
+  /// Turns the mesh's axes into the cuboid's (DOPE's `model_transforms` rotation); identity by default.
+  Eigen::Matrix3d cuboid_from_mesh = Eigen::Matrix3d::Identity();
 };
 
 struct ObjectsConfig {
   std::vector<ObjectConfig> objects;
   RefinerOptions refiner;
+  /// DOPE's file: the classes it has weights for but no mesh (detected, not refined), and those with a mesh but no
+  /// weights (never detected, so not refined); empty for this package's own layout.
+  std::vector<std::string> detected_not_refined, meshes_without_weights;
+  /// DOPE's `input_is_rectified`: whether the images DOPE (and so this refiner) reads are rectified; unset when the
+  /// file does not say.
+  std::optional<bool> input_is_rectified;
 };
 
 /// The name of instance `instance` on TF and topics: the object's name when it has one instance, else
@@ -59,8 +72,8 @@ std::string instance_name(const ObjectConfig& object, int instance);
 /// Turns a package:// URL into a file path (the ROS layer passes ros::package::getPath); throws when unknown.
 using PackageResolver = std::function<std::string(const std::string& package)>;
 
-/// Reads and checks the file: unique valid names, required keys, no unknown keys, finite transform, positive
-/// scale. Mesh paths are resolved but not opened (a missing mesh disables one object, not the config).
+/// Reads and checks the file: unique valid names and class ids, required keys, no unknown keys, finite
+/// transform, positive scale. Mesh paths are resolved but not opened (a missing mesh disables one object, not the config).
 /// Throws std::runtime_error naming the file, the object and the key.
 ObjectsConfig load_objects_config(const std::string& path, const PackageResolver& resolve_package = {},
                                   const RefinerOptions& base = RefinerOptions());
@@ -68,12 +81,21 @@ ObjectsConfig parse_objects_config(const std::string& yaml, const std::string& o
                                    const std::string& base_dir, const PackageResolver& resolve_package = {},
                                    const RefinerOptions& base = RefinerOptions());
 
-/// Resolves a mesh reference: package://pkg/rel, file:///abs, /abs, or a path relative to base_dir.
+/// Resolves a mesh reference: package://pkg/rel, file:///abs, /abs, or a path relative to base_dir (the objects
+/// file's folder, never the working directory). Throws std::runtime_error for file:// with a relative path.
 std::string resolve_mesh_path(const std::string& mesh, const std::string& base_dir,
                               const PackageResolver& resolve_package);
 
 /// Loads the object's mesh (scaled to metres, model_transform not applied, the declared symmetries attached).
-/// Throws std::runtime_error.
+/// Throws std::runtime_error, naming the file, when it cannot be read or does not fit the cuboid.
 Mesh load_object_mesh(const ObjectConfig& object);
+
+/// Whether a mesh's extent (metres along its axes, after mesh_scale) fits the object's cuboid: empty when it does
+/// (no cuboid given, or every side within kCuboidTolerance, as a handle or a cap leaves it), else one line that
+/// says what is wrong and how to fix it: a factor of 10, 100 or 1000 names the likely `mesh_scales`, axes in
+/// another order name the `model_transforms` rotation that lines them up, anything else gives both extents.
+std::string cuboid_mismatch(const Eigen::Vector3d& mesh_extent, const ObjectConfig& object);
+/// A side of the mesh may be this factor longer or shorter than the cuboid's.
+constexpr double kCuboidTolerance = 1.3;
 
 }  // namespace diffdope

@@ -1,6 +1,9 @@
 #include "diffdope/metrics.hpp"
 
+#include <Eigen/Cholesky>
+
 #include <algorithm>
+#include <cmath>
 #include <limits>
 #include <set>
 
@@ -45,6 +48,32 @@ double accuracy_auc(const std::vector<double>& errors, double max_threshold) {
   double area = 0;
   for (double e : errors) area += std::max(0.0, max_threshold - std::max(0.0, e));
   return 100.0 * area / (max_threshold * errors.size());
+}
+
+}  // namespace diffdope
+
+namespace diffdope {
+
+Vector6d pose_error_twist(const Pose& estimate, const Pose& truth, const Eigen::Vector3d& pivot_model) {
+  Vector6d e;
+  e.head<3>() = truth * pivot_model - estimate * pivot_model;
+  const Eigen::AngleAxisd turn(truth.R * estimate.R.transpose());
+  e.tail<3>() = turn.angle() * turn.axis();
+  return e;
+}
+
+CovarianceCheck check_covariance(const Vector6d& error, const Eigen::Matrix<double, 6, 6>& covariance) {
+  CovarianceCheck out;
+  const Eigen::LLT<Eigen::Matrix<double, 6, 6>> llt(covariance);
+  if (llt.info() != Eigen::Success || !(covariance.diagonal().minCoeff() > 0)) {
+    out.mahalanobis2 = std::numeric_limits<double>::quiet_NaN();
+    return out;
+  }
+  out.mahalanobis2 = error.dot(llt.solve(error));
+  out.within_two_sigma = true;
+  for (int i = 0; i < 6; ++i)
+    out.within_two_sigma = out.within_two_sigma && std::abs(error[i]) <= 2 * std::sqrt(covariance(i, i));
+  return out;
 }
 
 }  // namespace diffdope

@@ -12,6 +12,7 @@
 #include <algorithm>
 #include <array>
 #include <climits>
+#include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -233,6 +234,8 @@ int main(int argc, char** argv) {
 
     std::vector<double> given_ious;  // --masks coarse: per result, the mask given against the visible one
     int masks_checked = 0, masks_replaced = 0;  // given masks checked against depth, and replaced by its pixels
+    // The covariance against the true error, over plausible results of objects without symmetry.
+    int cov_checked = 0, cov_inside = 0, cov_two_sigma = 0;
     // Per object, of the given masks checked: their shift onto depth's edge (camera px), offset before and after.
     std::map<int, std::vector<std::array<double, 4>>> mask_shifts;
     // Where the evaluations went: per stage, the sum and the most one refinement made (retried results, which
@@ -378,6 +381,16 @@ int main(int argc, char** argv) {
                            {"best_dy", r.print.best_dy}, {"far_mean", r.print.far_mean}, {"far_std", r.print.far_std},
                            {"pixels", r.print.pixels}, {"render_contrast", r.print.render_contrast}};
           if (r.curvature.valid) line["weakest_rise"] = r.curvature.weakest_rise;  // (pose_curvature.hpp)
+          if (r.curvature.valid && !sym) {
+            const CovarianceCheck c = check_covariance(pose_error_twist(r.pose, gt->pose, mesh.center()), r.covariance);
+            line["covariance_mahalanobis2"] = c.mahalanobis2;
+            line["covariance_within_two_sigma"] = c.within_two_sigma;
+            if (r.plausible && std::isfinite(c.mahalanobis2)) {
+              ++cov_checked;
+              cov_inside += c.mahalanobis2 <= kChiSquared6At95;
+              cov_two_sigma += c.within_two_sigma;
+            }
+          }
           // The best run that ended elsewhere (its pose's points > 1 cm from the winner's, ADD(-S)): how much
           // worse its loss is, relative (a diagnostic of ambiguity; absent when every run agrees).
           double rival = std::numeric_limits<double>::infinity();
@@ -437,6 +450,14 @@ int main(int argc, char** argv) {
                 verdicts.rejected_far, verdicts.far, verdicts.rejected_near, verdicts.near);
     summary["verdict"] = {{"over_10mm", verdicts.far}, {"over_10mm_rejected", verdicts.rejected_far},
                           {"under_5mm", verdicts.near}, {"under_5mm_rejected", verdicts.rejected_near}};
+    if (cov_checked > 0) {
+      std::printf("covariance: the true error within the 95 %% ellipsoid for %d of %d plausible results (%.1f %%), "
+                  "every coordinate within 2 sigma for %d (%.1f %%)\n",
+                  cov_inside, cov_checked, 100.0 * cov_inside / cov_checked, cov_two_sigma,
+                  100.0 * cov_two_sigma / cov_checked);
+      summary["covariance"] = {{"checked", cov_checked}, {"within_95_ellipsoid", cov_inside},
+                               {"within_two_sigma", cov_two_sigma}};
+    }
     if (!given_ious.empty()) {  // --masks coarse: how coarse the masks given were
       std::sort(given_ious.begin(), given_ious.end());
       const double lo = given_ious[given_ious.size() / 10], mid = given_ious[given_ious.size() / 2],

@@ -1,6 +1,7 @@
 // Objects YAML (see include/diffdope/object_config.hpp).
 #include "diffdope/object_config.hpp"
 #include "diffdope/input_files.hpp"
+#include "track/object_config_internal.hpp"
 
 #include <yaml-cpp/yaml.h>
 
@@ -105,15 +106,22 @@ std::string resolve_mesh_path(const std::string& mesh, const std::string& base_d
     if (root.empty()) throw std::runtime_error("'" + mesh + "': package '" + rest.substr(0, slash) + "' not found");
     return (fs::path(root) / rest.substr(slash + 1)).lexically_normal().string();
   }
-  if (mesh.rfind(file_prefix, 0) == 0) return mesh.substr(file_prefix.size());
+  if (mesh.rfind(file_prefix, 0) == 0) {
+    // file:// names an absolute path (file:///abs); what follows file:// otherwise would be a host, and taken as
+    // a path it would resolve against whatever folder the node was started in.
+    const fs::path p(mesh.substr(file_prefix.size()));
+    if (!p.is_absolute())
+      throw std::runtime_error("'" + mesh + "': a file:// URL takes an absolute path (file:///path/to/mesh); a path "
+                               "relative to the objects file's folder is written without file://");
+    return p.lexically_normal().string();
+  }
   const fs::path p(mesh);
   if (p.is_absolute()) return p.lexically_normal().string();
   return (fs::path(base_dir) / p).lexically_normal().string();
 }
 
-namespace {
+namespace detail {
 
-/// The checks every object passes, whichever file layout it came from; resolves its mesh path.
 void check_object(ObjectConfig& o, const std::string& entry, const std::string& origin, const std::string& base_dir,
                   const PackageResolver& resolve_package, std::set<std::string>& names) {
   if (!valid_name(o.name))
@@ -137,49 +145,16 @@ void check_object(ObjectConfig& o, const std::string& entry, const std::string& 
   if (!o.symmetries.empty()) o.symmetric = true;  // declared symmetries are scored with ADD-S too
 }
 
-/// DOPE's own config_pose.yaml: an object per entry of `meshes`, with `mesh_scales`, `class_ids` and the pose
-/// topic `/<topic_publishing>/pose_<name>`. DOPE has already turned the pose it publishes by its
-/// `model_transforms` (and draws the mesh at that pose): the published pose is the mesh's, so no model transform
-/// applies here. DOPE's other keys (weights, dimensions, thresholds, camera topics...) are its own.
-ObjectsConfig parse_dope_config(const YAML::Node& root, const std::string& origin, const std::string& base_dir,
-                                const PackageResolver& resolve_package, const RefinerOptions& base) {
-  ObjectsConfig cfg;
-  cfg.refiner = base;
-  const YAML::Node meshes = root["meshes"];
-  if (!meshes.IsMap() || meshes.size() == 0)
-    throw std::runtime_error(origin + ": DOPE's 'meshes' must map object names to mesh files");
-  // The value of `name` in the map `key`, when both are there.
-  const auto entry_of = [&](const char* key, const std::string& name, YAML::Node* value) {
-    const YAML::Node map = root[key];
-    if (!map) return false;
-    if (!map.IsMap()) throw std::runtime_error(origin + ": DOPE's '" + key + "' must map object names to values");
-    const YAML::Node v = map[name];
-    if (!v) return false;
-    *value = v;
-    return true;
-  };
-  const std::string topic = root["topic_publishing"] ? root["topic_publishing"].as<std::string>() : "dope";
-  std::set<std::string> names;
-  for (const auto& kv : meshes) {
-    ObjectConfig o;
-    o.name = kv.first.as<std::string>();
-    const std::string where = origin + ": meshes." + o.name;
-    try {
-      o.mesh = kv.second.as<std::string>();
-      YAML::Node scale, id;  // (separate nodes: assigning to a yaml-cpp node that refers to one writes into it)
-      if (entry_of("mesh_scales", o.name, &scale)) o.mesh_scale = scale.as<double>();
-      if (entry_of("class_ids", o.name, &id)) o.class_id = id.as<int64_t>();
-    } catch (const YAML::Exception& e) {
-      throw std::runtime_error(where + ": " + e.what());
-    }
-    o.pose_topic = "/" + topic + "/pose_" + o.name;
-    check_object(o, where, origin, base_dir, resolve_package, names);
-    cfg.objects.push_back(o);
-  }
-  return cfg;
+void check_unique_class_ids(const std::vector<ObjectConfig>& objects, const std::string& origin) {
+  for (size_t i = 0; i < objects.size(); ++i)
+    for (size_t j = i + 1; j < objects.size(); ++j)
+      if (objects[i].class_id >= 0 && objects[i].class_id == objects[j].class_id)
+        throw std::runtime_error(origin + ": objects '" + objects[i].name + "' and '" + objects[j].name +
+                                 "' share the class id " + std::to_string(objects[i].class_id) +
+                                 ": their detections cannot be told apart; give each its own");
 }
 
-}  // namespace
+}  // namespace detail
 
 ObjectsConfig parse_objects_config(const std::string& yaml, const std::string& origin, const std::string& base_dir,
                                    const PackageResolver& resolve_package, const RefinerOptions& base) {
@@ -195,9 +170,9 @@ ObjectsConfig parse_objects_config(const std::string& yaml, const std::string& o
     throw std::runtime_error(origin + ": " + e.what());
   }
   if (!root.IsMap()) throw std::runtime_error(origin + ": expected a mapping with 'objects' (and 'refiner')");
-  if (!root["objects"] && root["meshes"]) {
+  if (detail::is_dope_config(root)) {
     try {
-      return parse_dope_config(root, origin, base_dir, resolve_package, base);
+      return detail::parse_dope_config(root, origin, base_dir, resolve_package, base);
     } catch (const YAML::Exception& e) {
       throw std::runtime_error(origin + ": " + e.what());
     }
@@ -244,9 +219,10 @@ ObjectsConfig parse_objects_config(const std::string& yaml, const std::string& o
     } catch (const YAML::Exception& e) {
       throw std::runtime_error(where + ": " + e.what());
     }
-    check_object(o, where, origin, base_dir, resolve_package, names);
+    detail::check_object(o, where, origin, base_dir, resolve_package, names);
     cfg.objects.push_back(o);
   }
+  detail::check_unique_class_ids(cfg.objects, origin);
   // Instances are named <name>_<k> on TF and topics: no other object may carry one of those names.
   for (const ObjectConfig& o : cfg.objects)
     for (int k = 0; o.max_instances > 1 && k < o.max_instances; ++k)
@@ -272,6 +248,8 @@ Mesh load_object_mesh(const ObjectConfig& object) {
   mo.scale = object.mesh_scale;
   Mesh mesh = Mesh::load(object.mesh_path, mo);
   mesh.symmetry = object.symmetries;
+  const std::string mismatch = cuboid_mismatch(mesh.bbox_max() - mesh.bbox_min(), object);
+  if (!mismatch.empty()) throw std::runtime_error(object.mesh_path + ": " + mismatch);
   return mesh;
 }
 

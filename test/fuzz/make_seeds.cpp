@@ -132,6 +132,17 @@ void text_seeds(const std::string& repo) {
   seed("objects_config", "symmetries.yaml",
        "objects:\n  - name: can\n    mesh: /tmp/can.ply\n    symmetries:\n      continuous: [{axis: [0, 0, 1], "
        "offset: [0, 0, 0.05]}]\n      discrete: [{translation: [0, 0, 0.1], rotation: [1, 0, 0, 0]}]\n");
+  const std::string dope_head =
+      "topic_camera: \"/dope/webcam/image_raw\"\ntopic_publishing: \"dope\"\ninput_is_rectified: True\n"
+      "weights: {\"cracker\": \"package://dope/w/cracker.pth\", \"sugar\": \"package://dope/w/sugar.pth\"}\n"
+      "dimensions: {\"cracker\": [16.4, 21.3, 7.2], \"sugar\": [9.3, 17.6, 4.5]}\n"
+      "class_ids: {\"cracker\": 1, \"sugar\": 2}\n";
+  seed("dope_config", "as_shipped.yaml", dope_head + "meshes:\n#  \"cracker\": \"file:///m/cracker.ply\"\n");
+  seed("dope_config", "edited.yaml",
+       dope_head + "meshes: {\"cracker\": \"file:///m/cracker.ply\", \"sugar\": \"meshes/sugar.obj\"}\n"
+                   "mesh_scales: {\"cracker\": 0.01, \"sugar\": 0.01}\n"
+                   "model_transforms: {\"cracker\": [[0, 0, 1, 0], [0, -1, 0, 0], [1, 0, 0, 0], [0, 0, 0, 1]]}\n");
+  seed("dope_config", "trimmed.yaml", "meshes: {box: box.ply}\nmesh_scales: {box: 0.001}\n");
   seed("urdf", "primitives.urdf",
        "<?xml version=\"1.0\"?>\n<robot name=\"arm\">\n  <material name=\"o\"><color rgba=\"0.9 0.5 0.1 1\"/></material>\n"
        "  <link name=\"base\"><visual><origin xyz=\"0 0 0.05\" rpy=\"0 0 0\"/><geometry><box size=\"0.2 0.2 0.1\"/>"

@@ -77,6 +77,15 @@ struct World {
     const auto rows = checker->addRefined(a);
     EXPECT_EQ(rows.size(), results.size()) << "results without ground truth at their stamp";
     for (const auto& r : rows) EXPECT_TRUE(checker->within(r)) << diffdope_ros::PoseChecker::formatRow(r);
+    // The reply carries each pose's covariance (probed by default): symmetric, with positive variances.
+    for (const auto& r : results) {
+      if (!r.plausible) continue;
+      for (int i = 0; i < 6; ++i) {
+        EXPECT_GT(r.covariance[size_t(7 * i)], 0.0) << r.name << " variance " << i;
+        for (int j = 0; j < i; ++j)
+          EXPECT_NEAR(r.covariance[size_t(6 * i + j)], r.covariance[size_t(6 * j + i)], 1e-12) << r.name;
+      }
+    }
   }
 };
 World* world = nullptr;

@@ -1,9 +1,16 @@
 // RefinerNodelet's diagnostics (once a second, from the watchdog): what runs, what each object is doing, the
 // inputs' counts, rates and latencies, and every error and warning category.
+#include <cmath>
+
 #include "diffdope_ros/conversions.hpp"
 #include "ros/refiner/refiner_nodelet.hpp"
 
 namespace diffdope_ros {
+namespace {
+/// A given mask this far (camera pixels) off depth's edge as a whole is worth a word: what a colour image not
+/// registered to depth shows (a pixel or two is an outline's rounding).
+constexpr double kMaskShiftToReport = 3.0;
+}  // namespace
 
 void RefinerNodelet::onDiagnostics(diagnostic_updater::DiagnosticStatusWrapper& stat) {
   Handover::Stats s;
@@ -54,6 +61,17 @@ void RefinerNodelet::onDiagnostics(diagnostic_updater::DiagnosticStatusWrapper& 
   stat.add("last latency (s)", format_fixed(s.last_latency));
   stat.add("mean latency (s)", format_fixed(s.frames_refined ? s.latency_sum / s.frames_refined : -1.0));
   stat.add("last refine time (ms)", format_fixed(s.last_refine_ms, 1));
+  // The sensor as measured on the last results: what a user checks the camera's driver against.
+  stat.add("depth noise at 1 m (mm)", s.depth_noise < 0 ? "not measured" : format_fixed(1e3 * s.depth_noise, 1));
+  if (s.mask_offset >= 0) {
+    const double shift = std::hypot(s.mask_shift[0], s.mask_shift[1]);
+    stat.add("given mask vs depth's edge (px)",
+             "offset " + format_fixed(s.mask_offset, 2) + " at the refining scale; shift (" +
+                 format_fixed(s.mask_shift[0], 0) + ", " + format_fixed(s.mask_shift[1], 0) + ") camera px" +
+                 (shift >= kMaskShiftToReport ? ": the masks sit off the depth image as a whole; is the segmenter's "
+                                                "image registered to depth (align_depth, depth_registered)?"
+                                              : ""));
+  }
   stat.add("~refine calls succeeded", s.requests_succeeded);
   stat.add("~refine calls failed or refused", s.requests_failed);
   stat.add("estimated cost (ms per object and evaluation)",

@@ -2,6 +2,7 @@
 // What the refiner nodelet's callbacks hand its worker, and what the worker reports back for diagnostics.
 #include <ros/time.h>
 
+#include <array>
 #include <condition_variable>
 #include <deque>
 #include <future>
@@ -38,6 +39,10 @@ struct Handover {
     long requests_succeeded = 0, requests_failed = 0;  // ~refine calls answered (Refine::Response::success)
     double last_latency = -1, latency_sum = 0, last_refine_ms = 0;
     double ms_per_evaluation = 0;  // the worker's refine-time estimate (copied for diagnostics)
+    // The sensor as the last results measured it: depth noise (metres at 1 m; -1: none), and a given mask's
+    // shift onto depth's edge (camera pixels) with the outline offset before it (-1: no mask checked).
+    double depth_noise = -1, mask_offset = -1;
+    std::array<double, 2> mask_shift{{0, 0}};
     bool cost_measured = false;    // ... measured here, not the prior
     ros::WallTime serving_since;   // a ~refine call is being served (streaming paused) since; zero if not
     ros::WallTime first_refined, last_refined;

@@ -15,6 +15,11 @@ diffdope_ros::RefinedPose refined_pose_msg(const diffdope::RefineResult& r, cons
                                            const diffdope::Pose& refined, const diffdope::Pose& inv_model) {
   diffdope_ros::RefinedPose p;
   p.pose.pose = pose_to_msg(refined * inv_model);
+  if (r.curvature.valid) {  // the covariance the loss's curvature gives (pose_curvature.hpp), at the frame's origin
+    const diffdope::Matrix6d cov = diffdope::covariance_at_origin(r.covariance, r.pivot, (refined * inv_model).t);
+    for (int a = 0; a < 6; ++a)
+      for (int b = 0; b < 6; ++b) p.covariance[size_t(6 * a + b)] = cov(a, b);
+  }
   p.initial_pose = pose_to_msg(seed.pose * inv_model);
   p.source = diffdope::to_string(seed.source);
   p.mask_iou = r.mask_iou;
@@ -85,13 +90,11 @@ std::vector<diffdope_ros::RefinedPose> Worker::publishResults(
     out.push_back(p);
     if (!r.plausible && !options_.publish_implausible) continue;  // scores still go out in ~refined_poses
     in.pose_pub.publish(p.pose);
-    if (r.curvature.valid) {  // the pose with the covariance the loss's curvature gives (pose_curvature.hpp)
+    if (r.curvature.valid) {  // the pose with its covariance
       geometry_msgs::PoseWithCovarianceStamped c;
       c.header = p.pose.header;
       c.pose.pose = p.pose.pose;
-      const diffdope::Matrix6d cov = diffdope::covariance_at_origin(r.covariance, r.pivot, (refined * inv_model).t);
-      for (int a = 0; a < 6; ++a)
-        for (int b = 0; b < 6; ++b) c.pose.covariance[size_t(6 * a + b)] = cov(a, b);
+      c.pose.covariance = p.covariance;
       in.cov_pub.publish(c);
     }
     if (in.last_tf_stamp == frame.header.stamp) continue;  // already on TF for this image: listeners keep the first
@@ -124,6 +127,13 @@ std::vector<diffdope_ros::RefinedPose> Worker::publishResults(
     handover_.stats.last_refine_ms = (now - start).toSec() * 1e3;
     handover_.stats.ms_per_evaluation = 1e3 * refine_time_.seconds_per_evaluation();
     handover_.stats.cost_measured = refine_time_.observations() > 0;
+    for (const diffdope_ros::RefinedPose& p : out) {
+      if (p.depth_noise >= 0) handover_.stats.depth_noise = p.depth_noise;
+      if (p.given_mask_offset >= 0) {
+        handover_.stats.mask_offset = p.given_mask_offset;
+        handover_.stats.mask_shift = {p.given_mask_shift[0], p.given_mask_shift[1]};
+      }
+    }
   }
   try {  // visualisation must never cost the refinement its result
     if (publishers_.overlay.getNumSubscribers() > 0) publishOverlay(frame, target_of, results);

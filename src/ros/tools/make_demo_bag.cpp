@@ -285,6 +285,13 @@ int main(int argc, char** argv) {
       map("model_transforms", [](const ObjectConfig&, size_t) { return "[[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]"; });
       map("meshes", [](const ObjectConfig& o, size_t) { return "\"file://" + o.mesh_path + "\""; });
       map("mesh_scales", [](const ObjectConfig&, size_t) { return std::string("1.0"); });
+      map("dimensions", [](const ObjectConfig& o, size_t) {  // the cuboid DOPE fits, in centimetres
+        const Mesh m = load_object_mesh(o);
+        const Eigen::Vector3d cm = 100.0 * (m.bbox_max() - m.bbox_min());
+        std::ostringstream s;
+        s << "[" << cm.x() << ", " << cm.y() << ", " << cm.z() << "]";
+        return s.str();
+      });
       map("class_ids", [](const ObjectConfig&, size_t k) { return std::to_string(k + 1); });
       dope << "thresh_angle: 0.5\nthresh_map: 0.01\nsigma: 3\nthresh_points: 0.1\n";
       const std::string dope_path = (out_dir / "config_pose.yaml").string();
