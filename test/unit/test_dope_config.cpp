@@ -231,6 +231,19 @@ TEST(DopeConfig, LoadingAMeshChecksItAgainstTheCuboid) {
   fs::remove_all(dir);
 }
 
+// The file the error for DOPE's file as shipped points to reads as it says.
+TEST(DopeConfig, TheExampleObjectsFileReads) {
+  const ObjectsConfig cfg =
+      load_objects_config(std::string(DIFFDOPE_SOURCE_DIR) + "/config/objects.example.yaml",
+                          [](const std::string& pkg) { return "/ws/" + pkg; });
+  ASSERT_EQ(cfg.objects.size(), 2u);
+  EXPECT_EQ(cfg.objects[0].name, "cracker");
+  EXPECT_DOUBLE_EQ(cfg.objects[0].mesh_scale, 0.01);
+  EXPECT_EQ(cfg.objects[1].mesh_path, "/ws/my_meshes/mustard/textured.obj");
+  EXPECT_EQ(cfg.objects[1].pose_topic, "/my_detector/mustard");
+  EXPECT_EQ(cfg.refiner.iterations, 60);
+}
+
 TEST(DopeConfig, ReadsWhetherDopesInputIsRectified) {
   EXPECT_FALSE(parse("meshes: {a: a.ply}\n").input_is_rectified.has_value());
   EXPECT_EQ(parse("input_is_rectified: True\nmeshes: {a: a.ply}\n").input_is_rectified, std::optional<bool>(true));
