@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 
 #include <filesystem>
+#include <vector>
 #include <set>
 #include <fstream>
 
@@ -16,9 +17,19 @@ using namespace diffdope;
 
 namespace {
 
+/// A scratch folder of this test process, removed with its contents when the process ends.
 std::string temp_dir(const std::string& name) {
+  struct Scratch {
+    std::vector<std::filesystem::path> dirs;
+    ~Scratch() {
+      std::error_code ec;
+      for (const auto& d : dirs) std::filesystem::remove_all(d, ec);
+    }
+  };
+  static Scratch scratch;
   const auto d = std::filesystem::temp_directory_path() / ("diffdope_calib_" + name + "_" + std::to_string(::getpid()));
   std::filesystem::create_directories(d);
+  scratch.dirs.push_back(d);
   return d.string();
 }
 
