@@ -23,6 +23,11 @@ struct SyntheticNoise {
   double flying_pixel_fraction = 0;
   double background_depth = 0.9;   // metres: a plane behind the object
   double brightness = 1.0;         // multiplies the object's colours (lighting mismatch)
+  /// The colour image's offset from the depth image and the masks, pixels (+x right, +y down): a colour camera
+  /// registered to depth with an error, as real RGB-D cameras are by a few pixels. The colour moves; depth and
+  /// masks stay. [-kMaxColourOffset, kMaxColourOffset]
+  double colour_offset_x_px = 0, colour_offset_y_px = 0;
+  static constexpr double kMaxColourOffset = 64;
 };
 
 struct SceneObject {

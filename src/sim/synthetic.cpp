@@ -1,7 +1,10 @@
 #include "diffdope/synthetic.hpp"
 
 #include <algorithm>
+#include <cmath>
 #include <opencv2/imgproc.hpp>
+#include <stdexcept>
+#include <string>
 
 #include "diffdope/procedural.hpp"
 
@@ -98,6 +101,16 @@ SyntheticScene synthesize_scene(Renderer& renderer, const Camera& cam, const std
         const float z = a + U(rng) * (b - a);
         out.depth.at<float>(y, x) = z + float(noise.depth_sigma_at_1m) * z * z * n01(rng);
       }
+  }
+  if (noise.colour_offset_x_px != 0 || noise.colour_offset_y_px != 0) {
+    const double dx = noise.colour_offset_x_px, dy = noise.colour_offset_y_px;
+    if (!(std::abs(dx) <= SyntheticNoise::kMaxColourOffset && std::abs(dy) <= SyntheticNoise::kMaxColourOffset))
+      throw std::invalid_argument("synthesize_scene: colour offset beyond " +
+                                  std::to_string(int(SyntheticNoise::kMaxColourOffset)) + " pixels");
+    cv::Mat moved;  // (a fresh image: warpAffine does not work in place)
+    cv::warpAffine(out.rgb, moved, cv::Matx23d(1, 0, dx, 0, 1, dy), out.rgb.size(), cv::INTER_LINEAR,
+                   cv::BORDER_REPLICATE);
+    out.rgb = moved;
   }
   for (size_t i = 0; i < n; ++i) {
     const double full = cv::countNonZero(out.full_masks[i]);

@@ -1,9 +1,12 @@
 // diffdope_make_dataset: writes a small BOP-format dataset of generated scenes (the project's own test data).
 //   diffdope_make_dataset --out ROOT [--scenes N] [--seed S] [--width W] [--height H] [--split NAME]
+//                         [--colour-offset DX,DY]
 // Objects: 1 printed box, 2 can (continuous symmetry, scored with ADD-S), 3 L-block (asymmetric). Each scene has
 // a target and one or two distractors that partly occlude it, over a textured background, with colour noise,
 // depth noise growing with z^2, and depth holes (blobs and silhouette borders). Files as BOP: millimetres,
 // depth_scale 1.0 (mm per unit), rgb/depth/mask/mask_visib PNGs, scene_camera/scene_gt/scene_gt_info JSON.
+// --colour-offset moves the colour image off the depth image and the masks by (DX, DY) pixels, as a real RGB-D
+// camera's registration leaves it (SyntheticNoise::colour_offset_x_px).
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -25,7 +28,8 @@ using nlohmann::json;
 namespace {
 
 int usage(int rc) {
-  std::cerr << "usage: diffdope_make_dataset --out ROOT [--scenes N] [--seed S] [--width W] [--height H] [--split NAME]\n";
+  std::cerr << "usage: diffdope_make_dataset --out ROOT [--scenes N] [--seed S] [--width W] [--height H] [--split NAME]\n"
+               "                            [--colour-offset DX,DY]  (pixels: the colour image off depth and masks)\n";
   return rc;
 }
 
@@ -52,6 +56,7 @@ int main(int argc, char** argv) {
   std::string out, split = "test";
   int scenes = 6, width = 640, height = 480;
   uint64_t seed = 1;
+  double colour_dx = 0, colour_dy = 0;
   try {
     for (int i = 1; i < argc; ++i) {
       const std::string a = argv[i];
@@ -64,7 +69,13 @@ int main(int argc, char** argv) {
       else if (a == "--width") width = int(parse_integer_arg(a, v, 16, 16384));
       else if (a == "--height") height = int(parse_integer_arg(a, v, 16, 16384));
       else if (a == "--split") split = v;
-      else return usage(2);
+      else if (a == "--colour-offset") {
+        const size_t comma = v.find(',');
+        if (comma == std::string::npos) throw std::invalid_argument("--colour-offset: expected DX,DY, got '" + v + "'");
+        const double m = SyntheticNoise::kMaxColourOffset;
+        colour_dx = parse_number_arg(a + " (DX)", v.substr(0, comma), -m, m);
+        colour_dy = parse_number_arg(a + " (DY)", v.substr(comma + 1), -m, m);
+      } else return usage(2);
     }
   } catch (const std::invalid_argument& e) {
     std::cerr << "diffdope_make_dataset: " << e.what() << "\n";
@@ -125,6 +136,7 @@ int main(int argc, char** argv) {
         }
         SyntheticNoise noise;
         noise.brightness = 0.85 + 0.15 * U(rng);
+        noise.colour_offset_x_px = colour_dx, noise.colour_offset_y_px = colour_dy;
         scene = synthesize_scene(*renderer, cam, objs, noise, uint32_t(rng()));
         if (scene.visible_fraction[0] >= 0.6 && scene.visible_fraction[0] < 0.98) break;
       }

@@ -41,7 +41,8 @@ struct ClutteredScene {
 
 /// The object standing on a table seen from 45 degrees above, a box touching its side and a post between it and
 /// the camera hiding part of it.
-ClutteredScene make_cluttered_scene(uint32_t seed) {
+/// `colour_dx`: the colour image this many pixels right of the depth image and the masks (a camera's registration).
+ClutteredScene make_cluttered_scene(uint32_t seed, double colour_dx = 0) {
   ClutteredScene s;
   const Pose camera_from_world = look_at(Eigen::Vector3d(0.05, -0.38, 0.38), Eigen::Vector3d(0, 0, 0.04));
   Eigen::Vector3d lo = Eigen::Vector3d::Constant(1e9), hi = -lo;
@@ -56,6 +57,7 @@ ClutteredScene make_cluttered_scene(uint32_t seed) {
   auto renderer = make_cpu_renderer();
   SyntheticNoise noise;
   noise.brightness = 0.9;
+  noise.colour_offset_x_px = colour_dx;
   s.scene = synthesize_scene(*renderer, s.cam,
                              {{&s.object, s.truth}, {&s.table, table}, {&s.neighbour, neighbour}, {&s.post, post}},
                              noise, seed);
@@ -314,13 +316,19 @@ TEST(ObjectPixels, FromColourAColourNeitherRegionShowsIsUndecided) {
   EXPECT_LT(q.at<float>(100, 65), 0.5f);
 }
 
-// A mask off the image as a whole (drawn on a colour image not registered to depth) is reported with the shift,
-// in camera pixels at any refining scale, that lays it on depth's edge; an exact mask needs none.
-TEST(ObjectPixels, AMaskOffAsAWholeReportsItsShift) {
-  const ClutteredScene s = make_cluttered_scene(5);
+// A colour image registered to depth with an error (the generator's colour offset: colour moves, depth and masks
+// stay), and a segmenter's mask drawn on it, off depth as a whole: the result reports the shift, in camera pixels
+// at any refining scale, that lays the mask on depth's edge; an exact mask needs none.
+TEST(ObjectPixels, AMaskDrawnOnMisregisteredColourReportsItsShift) {
+  const ClutteredScene registered = make_cluttered_scene(5), s = make_cluttered_scene(5, 4.0);
+  // The generator moved the colour alone.
+  EXPECT_EQ(cv::norm(registered.scene.depth, s.scene.depth, cv::NORM_INF), 0.0);
+  EXPECT_EQ(cv::norm(registered.scene.visible_masks[0], s.scene.visible_masks[0], cv::NORM_INF), 0.0);
+  const cv::Rect inner(8, 8, s.cam.width - 16, s.cam.height - 16);
+  EXPECT_EQ(cv::norm(registered.scene.rgb(inner), s.scene.rgb(inner + cv::Point(4, 0)), cv::NORM_INF), 0.0);
   const cv::Mat exact = s.scene.visible_masks[0];
-  cv::Mat moved;
-  cv::warpAffine(exact, moved, cv::Matx23d(1, 0, 4, 0, 1, 0), exact.size(), cv::INTER_NEAREST);  // 4 px right
+  cv::Mat on_colour;  // the visible mask where the colour image shows the object
+  cv::warpAffine(exact, on_colour, cv::Matx23d(1, 0, 4, 0, 1, 0), exact.size(), cv::INTER_NEAREST);
   for (const double scale : {1.0, 0.5}) {
     RefinerOptions o = test_options();
     o.image_scale = scale;
@@ -331,7 +339,7 @@ TEST(ObjectPixels, AMaskOffAsAWholeReportsItsShift) {
     EXPECT_DOUBLE_EQ(e.given_mask_shift[0], 0.0) << "scale " << scale;
     EXPECT_DOUBLE_EQ(e.given_mask_shift[1], 0.0) << "scale " << scale;
     EXPECT_LE(e.given_mask_shifted_offset, e.given_mask_offset) << "scale " << scale;
-    given.mask = moved;
+    given.mask = on_colour;
     const RefineResult m = Refiner(o).refine(s.cam, given, s.object, s.truth);
     EXPECT_NEAR(m.given_mask_shift[0], -4.0, 1.0 / scale) << "scale " << scale;
     EXPECT_NEAR(m.given_mask_shift[1], 0.0, 1.0 / scale) << "scale " << scale;

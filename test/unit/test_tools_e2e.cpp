@@ -142,7 +142,8 @@ TEST(ToolsEndToEnd, EvalSkipsWhatItCannotUseAndScoresTheRest) {
 TEST(ToolsEndToEnd, GeneratorArgumentsAreCheckedNotThrown) {
   TempDir tmp;
   const std::string err = (tmp.path / "err.txt").string();
-  for (const std::string flags : {"--width abc", "--scenes 99999999999", "--height 1e3"}) {
+  for (const std::string flags : {"--width abc", "--scenes 99999999999", "--height 1e3", "--colour-offset 3",
+                                  "--colour-offset 3,x", "--colour-offset 1000,0", "--colour-offset nan,0"}) {
     EXPECT_EQ(run(std::string(DIFFDOPE_MAKE_DATASET_EXE) + " --out " + (tmp.path / "d").string() + " " + flags +
                   " 2> " + err),
               2)
@@ -151,6 +152,25 @@ TEST(ToolsEndToEnd, GeneratorArgumentsAreCheckedNotThrown) {
     const std::string text((std::istreambuf_iterator<char>(f)), std::istreambuf_iterator<char>());
     EXPECT_NE(text.find(flags.substr(0, flags.find(' '))), std::string::npos) << text;
   }
+}
+
+// --colour-offset: the colour image moved off depth and the masks as a camera's registration leaves it; depth,
+// masks and ground truth are those of the registered set.
+TEST(ToolsEndToEnd, GeneratorMovesTheColourImageOffDepth) {
+  TempDir tmp;
+  const std::string a = (tmp.path / "a").string(), b = (tmp.path / "b").string();
+  const std::string common = " --scenes 1 --width 160 --height 120 --seed 7 2>/dev/null";
+  ASSERT_EQ(run(std::string(DIFFDOPE_MAKE_DATASET_EXE) + " --out " + a + common), 0);
+  ASSERT_EQ(run(std::string(DIFFDOPE_MAKE_DATASET_EXE) + " --out " + b + " --colour-offset 3,-2" + common), 0);
+  const auto read = [](const std::string& root, const char* file) {
+    return cv::imread(root + "/test/000001/" + file, cv::IMREAD_UNCHANGED);
+  };
+  for (const char* same : {"depth/000000.png", "mask_visib/000000_000000.png"})
+    EXPECT_EQ(cv::norm(read(a, same), read(b, same), cv::NORM_INF), 0.0) << same;
+  const cv::Mat ra = read(a, "rgb/000000.png"), rb = read(b, "rgb/000000.png");
+  const cv::Rect inner(8, 8, 160 - 16, 120 - 16);
+  EXPECT_GT(cv::norm(ra(inner), rb(inner), cv::NORM_INF), 0.0);
+  EXPECT_EQ(cv::norm(ra(inner), rb(inner + cv::Point(3, -2)), cv::NORM_INF), 0.0);  // moved 3 right, 2 up
 }
 
 // An evaluation that evaluated nothing, or scored a symmetric object without knowing it is, must not
