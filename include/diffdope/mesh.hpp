@@ -53,6 +53,9 @@ struct MeshLoadOptions {
   std::vector<std::string> resource_dirs;
 };
 
+/// Whether this build simplifies dense meshes (built with meshoptimizer); without it every mesh is drawn whole.
+bool lods_built();
+
 /// A simplified version of a mesh's surface over the mesh's textures: fewer triangles, and only the vertices they
 /// use (corners equal in position, UV and colour merged). Mesh::finalize() builds a chain of them with
 /// meshoptimizer (UV seams and borders kept) for dense meshes; the renderer draws the coarsest one whose error

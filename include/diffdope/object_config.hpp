@@ -25,6 +25,7 @@
 // (cuboid_mismatch()).
 #include <cstdint>
 #include <functional>
+#include <map>
 #include <optional>
 #include <string>
 #include <vector>
@@ -68,6 +69,16 @@ struct ObjectsConfig {
 /// The name of instance `instance` on TF and topics: the object's name when it has one instance, else
 /// <name>_<instance>.
 std::string instance_name(const ObjectConfig& object, int instance);
+
+/// The class id of each object (DOPE's, by which a Detection3DArray names it): `overrides` by name (the node's
+/// ~class_ids) first, then the file's. Throws std::runtime_error naming both objects and `origin` when two objects
+/// end with one id: their detections could not be told apart.
+std::map<std::string, int64_t> object_class_ids(const std::vector<ObjectConfig>& objects,
+                                                std::map<std::string, int64_t> overrides, const std::string& origin);
+
+/// DOPE's classes that are not refined, in one line to say once at start ("detected by DOPE but not refined (no
+/// mesh): ...; meshes without weights (never detected, not refined): ..."); empty when every class is refined.
+std::string unrefined_classes(const ObjectsConfig& cfg);
 
 /// Turns a package:// URL into a file path (the ROS layer passes ros::package::getPath); throws when unknown.
 using PackageResolver = std::function<std::string(const std::string& package)>;

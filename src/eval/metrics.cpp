@@ -50,9 +50,7 @@ double accuracy_auc(const std::vector<double>& errors, double max_threshold) {
   return 100.0 * area / (max_threshold * errors.size());
 }
 
-}  // namespace diffdope
 
-namespace diffdope {
 
 Vector6d pose_error_twist(const Pose& estimate, const Pose& truth, const Eigen::Vector3d& pivot_model) {
   Vector6d e;

@@ -9,7 +9,9 @@
 #include <opencv2/imgproc.hpp>
 #include <unordered_map>
 
+#ifdef DIFFDOPE_WITH_MESHOPTIMIZER
 #include <meshoptimizer.h>
+#endif
 
 // The texture sampling the renderer uses (header-only kernel maths): seams and plainness are judged on the
 // colours it will actually draw.
@@ -282,9 +284,18 @@ void Mesh::build_adjacency() {
                    opposite_, seams_, closed_outward_);
 }
 
+bool lods_built() {
+#ifdef DIFFDOPE_WITH_MESHOPTIMIZER
+  return true;
+#else
+  return false;
+#endif
+}
+
 void Mesh::build_lods() {
   lods_.clear();
-  if (num_triangles() <= kLodMinTriangles) return;
+  if (num_triangles() <= kLodMinTriangles || !lods_built()) return;
+#ifdef DIFFDOPE_WITH_MESHOPTIMIZER
   // meshoptimizer keeps vertices shared by triangles of different textures apart by simplifying each texture's
   // triangles on their own, with their outline locked (colour seams between textures stay where they are).
   // Meshes are often stored as triangle soups (3 vertices per triangle, as many PLY exporters write them):
@@ -363,6 +374,7 @@ void Mesh::build_lods() {
     lod.tri_uv_area = uv_areas(lod.uvs, lod.triangles);
     lods_.push_back(std::move(lod));
   }
+#endif
 }
 
 std::vector<Eigen::Vector3d> Mesh::bbox_corners() const {

@@ -42,9 +42,11 @@ Plane fit_plane(const std::vector<Eigen::Vector3d>& points) {
 /// pixels.
 Plane dominant_plane(const std::vector<Eigen::Vector3d>& points, double tolerance, std::mt19937& rng) {
   std::uniform_int_distribution<size_t> pick(0, points.size() - 1);
-  std::vector<size_t> sample;
+  // The sample's points side by side (not indices into the cloud): each hypothesis reads them from the cache.
+  std::vector<Eigen::Vector3d> sample;
   const size_t n_sample = std::min<size_t>(points.size(), 8000);
-  for (size_t k = 0; k < n_sample; ++k) sample.push_back(pick(rng));
+  sample.reserve(n_sample);
+  for (size_t k = 0; k < n_sample; ++k) sample.push_back(points[pick(rng)]);
   Plane best;
   size_t best_count = 0;
   for (int h = 0; h < 200; ++h) {
@@ -54,7 +56,7 @@ Plane dominant_plane(const std::vector<Eigen::Vector3d>& points, double toleranc
     Plane p{n.normalized(), 0};
     p.offset = -p.normal.dot(a);
     size_t count = 0;
-    for (size_t k : sample) count += p.distance(points[k]) <= tolerance;
+    for (const Eigen::Vector3d& q : sample) count += p.distance(q) <= tolerance;
     if (count > best_count) best_count = count, best = p;
   }
   if (best_count == 0) return best;

@@ -396,5 +396,6 @@ int raster_batch(const RasterBatch& b, int* t, int* x0, int* x1, int* y0, int* y
   return HWY_DYNAMIC_DISPATCH(RasterBatchImpl)(b, t, x0, x1, y0, y1, rest);
 }
 const char* simd_row_target() { return HWY_DYNAMIC_DISPATCH(TargetName)(); }
+bool simd_rows_built() { return true; }
 }  // namespace diffdope
 #endif

@@ -2,7 +2,7 @@
 // The CPU's pixel stages over a row of pixels at once (Highway vectors, chosen at run time for the CPU it runs on):
 // the lane kernels (src/render/kernels/*_lanes.inc) on many pixels, the same bits per pixel as their
 // one-pixel instantiation. Each runs the row's first pixels, as many as fill whole vectors, and returns how many;
-// the caller does the rest one pixel at a time.
+// the caller does the rest one pixel at a time. Built without Highway (pixel_rows.cpp), each does none.
 #include "render/kernels/pixel_loss.hpp"
 #include "render/kernels/silhouette.hpp"
 
@@ -37,7 +37,7 @@ struct ShadeRow {
   int n;
 };
 
-/// The shade stage on the whole row (the last vector partly filled); returns n.
+/// The shade stage on the whole row (the last vector partly filled); returns n (0 without Highway).
 int shade_row(const ShadeRow& row);
 
 /// A row of the blend detection: each pixel's pair with its right neighbour (slot 2 q) and with the pixel below
@@ -61,7 +61,7 @@ struct BlendRow {
 };
 
 /// The blend detection on the whole row (its pairs of different triangles packed into vectors, the longest walks
-/// finished one pair at a time); returns n.
+/// finished one pair at a time); returns n (0 without Highway).
 int blend_row(const BlendRow& row);
 
 /// Triangles of a hypothesis for the raster (pipeline::RasterStage), on SIMD vectors: of those drawn (area != 0)
@@ -83,7 +83,10 @@ struct RasterBatch {
 /// their bounds into x0 .. y1 (room for end - first each); returns how many it left.
 int raster_batch(const RasterBatch& b, int* t, int* x0, int* x1, int* y0, int* y1, int* rest);
 
-/// The instruction set the rows run on here (e.g. "AVX3", "AVX2", "SSE4"; for the profile and docs/benchmarks.md).
+/// The instruction set the rows run on here (e.g. "AVX3", "AVX2", "SSE4"; for the profile and docs/benchmarks.md),
+/// or "none (built without Highway)".
 const char* simd_row_target();
+/// Whether the rows do pixels here (false in a build without Highway).
+bool simd_rows_built();
 
 }  // namespace diffdope

@@ -29,7 +29,7 @@ std::map<std::string, YAML::Node> entries(const YAML::Node& root, const char* ke
   const YAML::Node map = root[key];
   if (!map || map.IsNull()) return out;
   if (!map.IsMap()) throw std::runtime_error(origin + ": DOPE's '" + key + "' must map object names to values");
-  for (const auto& kv : map) out[kv.first.as<std::string>()] = kv.second;
+  for (const auto& kv : map) out.emplace(kv.first.as<std::string>(), kv.second);
   return out;
 }
 

@@ -145,16 +145,35 @@ void check_object(ObjectConfig& o, const std::string& entry, const std::string& 
   if (!o.symmetries.empty()) o.symmetric = true;  // declared symmetries are scored with ADD-S too
 }
 
-void check_unique_class_ids(const std::vector<ObjectConfig>& objects, const std::string& origin) {
-  for (size_t i = 0; i < objects.size(); ++i)
-    for (size_t j = i + 1; j < objects.size(); ++j)
-      if (objects[i].class_id >= 0 && objects[i].class_id == objects[j].class_id)
-        throw std::runtime_error(origin + ": objects '" + objects[i].name + "' and '" + objects[j].name +
-                                 "' share the class id " + std::to_string(objects[i].class_id) +
-                                 ": their detections cannot be told apart; give each its own");
+}  // namespace detail
+
+std::map<std::string, int64_t> object_class_ids(const std::vector<ObjectConfig>& objects,
+                                                std::map<std::string, int64_t> overrides, const std::string& origin) {
+  for (const ObjectConfig& o : objects)
+    if (o.class_id >= 0) overrides.emplace(o.name, o.class_id);  // (an override of that name stays)
+  std::map<int64_t, std::string> owner;
+  for (const ObjectConfig& o : objects) {
+    const auto id = overrides.find(o.name);
+    if (id == overrides.end()) continue;
+    const auto [it, fresh] = owner.emplace(id->second, o.name);
+    if (!fresh)
+      throw std::runtime_error(origin + ": objects '" + it->second + "' and '" + o.name + "' share the class id " +
+                               std::to_string(id->second) + ": their detections cannot be told apart; give each "
+                               "its own");
+  }
+  return overrides;
 }
 
-}  // namespace detail
+std::string unrefined_classes(const ObjectsConfig& cfg) {
+  if (cfg.detected_not_refined.empty() && cfg.meshes_without_weights.empty()) return "";
+  const auto list = [](const std::vector<std::string>& names) {
+    std::string s;
+    for (const std::string& n : names) s += (s.empty() ? "" : ", ") + n;
+    return s.empty() ? std::string("none") : s;
+  };
+  return "detected by DOPE but not refined (no mesh): " + list(cfg.detected_not_refined) +
+         "; meshes without weights (never detected, not refined): " + list(cfg.meshes_without_weights);
+}
 
 ObjectsConfig parse_objects_config(const std::string& yaml, const std::string& origin, const std::string& base_dir,
                                    const PackageResolver& resolve_package, const RefinerOptions& base) {
@@ -222,7 +241,7 @@ ObjectsConfig parse_objects_config(const std::string& yaml, const std::string& o
     detail::check_object(o, where, origin, base_dir, resolve_package, names);
     cfg.objects.push_back(o);
   }
-  detail::check_unique_class_ids(cfg.objects, origin);
+  object_class_ids(cfg.objects, {}, origin);
   // Instances are named <name>_<k> on TF and topics: no other object may carry one of those names.
   for (const ObjectConfig& o : cfg.objects)
     for (int k = 0; o.max_instances > 1 && k < o.max_instances; ++k)

@@ -13,9 +13,6 @@ namespace diffdope::detail {
 void check_object(ObjectConfig& o, const std::string& entry, const std::string& origin, const std::string& base_dir,
                   const PackageResolver& resolve_package, std::set<std::string>& names);
 
-/// Two objects with one class id would take each other's detections: an error naming both.
-void check_unique_class_ids(const std::vector<ObjectConfig>& objects, const std::string& origin);
-
 /// Whether the file is DOPE's config_pose.yaml (any of its own keys, and none of ours).
 bool is_dope_config(const YAML::Node& root);
 

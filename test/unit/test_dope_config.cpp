@@ -111,6 +111,33 @@ TEST(DopeConfig, DuplicateClassIdsAreAnErrorNamingBoth) {
   EXPECT_CONTAINS(ours, "objects 'a' and 'b' share the class id 3");
 }
 
+TEST(DopeConfig, ANodesClassIdsOverrideTheFilesAndMayNotCollide) {
+  const ObjectsConfig cfg = parse(kHead + kWeights + "meshes: {cracker: /m/c.ply, sugar: /m/s.ply}\n");
+  const std::map<std::string, int64_t> ids = object_class_ids(cfg.objects, {}, "cfg");
+  ASSERT_EQ(ids, (std::map<std::string, int64_t>{{"cracker", 1}, {"sugar", 2}}));
+  // An override (the node's ~class_ids) wins over the file's id, and names may be of no object.
+  const std::map<std::string, int64_t> moved = object_class_ids(cfg.objects, {{"cracker", 90}, {"other", 7}}, "cfg");
+  EXPECT_EQ(moved.at("cracker"), 90);
+  EXPECT_EQ(moved.at("sugar"), 2);
+  EXPECT_EQ(moved.at("other"), 7);
+  // One that gives a refined object the id of another is an error naming both and where the ids came from.
+  try {
+    object_class_ids(cfg.objects, {{"cracker", 2}}, "x.yaml with ~class_ids");
+    FAIL() << "two objects with one id";
+  } catch (const std::runtime_error& e) {
+    EXPECT_CONTAINS(std::string(e.what()), "x.yaml with ~class_ids");
+    EXPECT_CONTAINS(std::string(e.what()), "'cracker' and 'sugar' share the class id 2");
+  }
+}
+
+TEST(DopeConfig, TheClassesNotRefinedAreSaidInOneLine) {
+  // DOPE detects cheese and dressing (weights) without a mesh; a mesh of a class without weights is never detected.
+  const ObjectsConfig cfg = parse(kHead + kWeights + "meshes: {cracker: /m/c.ply, ketchup: /m/k.ply}\n");
+  EXPECT_EQ(unrefined_classes(cfg), "detected by DOPE but not refined (no mesh): cheese, dressing, sugar; meshes "
+                                    "without weights (never detected, not refined): ketchup");
+  EXPECT_EQ(unrefined_classes(parse("meshes: {a: a.ply}\n")), "") << "every class refined: nothing to say";
+}
+
 TEST(DopeConfig, FileUrlsAreAbsoluteAndRelativePathsFollowTheFile) {
   EXPECT_EQ(parse("meshes: {a: 'file:///m/a.ply'}\n").objects[0].mesh_path, "/m/a.ply");
   const std::string e = parse_error("meshes: {a: 'file://meshes/a.ply'}\n");

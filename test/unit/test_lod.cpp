@@ -41,6 +41,7 @@ int seam_edges(const std::vector<unsigned char>& seams) {
 }  // namespace
 
 TEST(Lod, DenseMeshesGetAChainOfSimplerSurfaces) {
+  if (!lods_built()) GTEST_SKIP() << "built without meshoptimizer";
   const Mesh m = dense_sphere();
   ASSERT_GE(m.lods().size(), 3u);
   int previous = m.num_triangles();
@@ -62,6 +63,7 @@ TEST(Lod, DenseMeshesGetAChainOfSimplerSurfaces) {
 }
 
 TEST(Lod, TriangleSoupsAreMergedFirst) {
+  if (!lods_built()) GTEST_SKIP() << "built without meshoptimizer";
   const Mesh full = dense_sphere();
   const Mesh soup = soup_of(full);
   ASSERT_FALSE(soup.lods().empty());
@@ -87,6 +89,7 @@ TEST(Lod, TriangleSoupsAreMergedFirst) {
 // Far away the renderer draws a coarse level that looks like the full mesh, and the loss barely changes; close
 // up it keeps the detail.
 TEST(Lod, FarObjectsAreDrawnCoarserAndLookTheSame) {
+  if (!lods_built()) GTEST_SKIP() << "built without meshoptimizer";
   const Mesh m = dense_sphere();
   const Camera cam(600, 600, 319.5, 239.5, 640, 480);
   RenderOptions exact;
@@ -115,4 +118,14 @@ TEST(Lod, FarObjectsAreDrawnCoarserAndLookTheSame) {
   EXPECT_GT(far_level, near_level);
   EXPECT_GE(far_level, 2);
   EXPECT_EQ(full->render(cam, m, {look_pose(0, 0, 0, 0, 0, 1.2)})[0].lod, 0) << "lod_pixel_error 0: the full mesh";
+}
+
+TEST(Lod, WithoutMeshoptimizerDenseMeshesAreDrawnWhole) {
+  if (lods_built()) GTEST_SKIP() << "built with meshoptimizer (Lod.DenseMeshesGetAChainOfSimplerSurfaces)";
+  const Mesh m = dense_sphere();
+  EXPECT_TRUE(m.lods().empty());
+  const Camera cam(600, 600, 319.5, 239.5, 640, 480);
+  const RenderImage far = make_cpu_renderer()->render(cam, m, {look_pose(0, 0, 0, 0, 0, 1.2)})[0];
+  EXPECT_EQ(far.lod, 0);
+  EXPECT_GT(cv::countNonZero(far.coverage >= 0.5f), 100);
 }

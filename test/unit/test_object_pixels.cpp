@@ -336,8 +336,9 @@ TEST(ObjectPixels, AMaskDrawnOnMisregisteredColourReportsItsShift) {
     Observation given = s.obs;
     given.mask = exact;
     const RefineResult e = Refiner(o).refine(s.cam, given, s.object, s.truth);
-    EXPECT_DOUBLE_EQ(e.given_mask_shift[0], 0.0) << "scale " << scale;
-    EXPECT_DOUBLE_EQ(e.given_mask_shift[1], 0.0) << "scale " << scale;
+    // (within a working pixel: drawn whole, without meshoptimizer's levels, the derived outline moves by one)
+    EXPECT_LE(std::abs(e.given_mask_shift[0]), 1.0 / scale) << "scale " << scale;
+    EXPECT_LE(std::abs(e.given_mask_shift[1]), 1.0 / scale) << "scale " << scale;
     EXPECT_LE(e.given_mask_shifted_offset, e.given_mask_offset) << "scale " << scale;
     given.mask = on_colour;
     const RefineResult m = Refiner(o).refine(s.cam, given, s.object, s.truth);

@@ -70,7 +70,7 @@ TEST(SimdRows, ARowGivesThePixelKernelsBitsForEveryValueGradientAndSum) {
           double sum[3] = {0.5, 0.25, 0.125};  // loss_row adds to what is there
           const int done = loss_row(row, sum);
           ASSERT_LE(done, n);
-          if (n >= 64) ASSERT_GT(done, 0) << "a vector holds at most 64 floats (2048-bit SVE)";
+          if (n >= 64 && simd_rows_built()) ASSERT_GT(done, 0) << "a vector holds at most 64 floats (2048-bit SVE)";
           double want[3] = {0.5, 0.25, 0.125};
           const float zero3[3] = {0.f, 0.f, 0.f};
           for (int x = 0; x < done; ++x) {
@@ -181,7 +181,7 @@ TEST(SimdRows, AShadeRowGivesThePixelKernelsBitsForTriangleAttributesAndBarycent
                            float(y), n};
         const int done = shade_row(row);
         ASSERT_LE(done, n);
-        if (n >= 64) ASSERT_GT(done, 0) << "a vector holds at most 64 floats (2048-bit SVE)";
+        if (n >= 64 && simd_rows_built()) ASSERT_GT(done, 0) << "a vector holds at most 64 floats (2048-bit SVE)";
         for (int i = 0; i < done; ++i) {
           const int want_t = pipeline::key_triangle(key[size_t(i)]);
           ASSERT_EQ(tri_out[size_t(i)], want_t);
@@ -219,7 +219,7 @@ TEST(SimdRows, AShadeRowGivesThePixelKernelsBitsForTriangleAttributesAndBarycent
       }
   }
   EXPECT_EQ(rows, 2 * 14 * 4);
-  EXPECT_GT(covered, 1000);
+  if (simd_rows_built()) EXPECT_GT(covered, 1000);  // (without Highway the rows do no pixel)
 }
 
 /// A scan-like bottle drawn by a brute-force z-buffer (nearest triangle whose interior holds the pixel centre,
@@ -439,7 +439,8 @@ TEST(SimdRows, ARasterBatchDrawsTheSmallTrianglesAndLeavesTheOthersThatMeetTheRe
       std::vector<int> t(room), x0(room), x1(room), y0(room), y1(room);
       int rest = -1;
       const int n = raster_batch(b, t.data(), x0.data(), x1.data(), y0.data(), y1.data(), &rest);
-      ASSERT_TRUE(rest >= first && rest <= end && end - rest < 64) << "at most one partial vector is left whole";
+      ASSERT_TRUE(rest >= first && rest <= end && (end - rest < 64 || !simd_rows_built()))
+          << "at most one partial vector is left whole (without Highway: all)";
       int k = 0;
       for (int tri = first; tri < rest; ++tri) {  // as RasterStage::operator() picks and draws them
         if (area[size_t(tri)] == 0.f) continue;
@@ -480,7 +481,7 @@ TEST(SimdRows, ARasterBatchDrawsTheSmallTrianglesAndLeavesTheOthersThatMeetTheRe
       looked_at += end - first;
     }
   }
-  EXPECT_GT(left, 100);
+  if (simd_rows_built()) EXPECT_GT(left, 100);  // (without Highway every triangle is the caller's)
   EXPECT_LT(left, looked_at / 3);
 }
 

@@ -89,32 +89,13 @@ std::unique_ptr<diffdope::Refiner> RefinerNodelet::loadObjects(WorkerOptions& op
     if (settings_.objects_config.empty())
       throw std::runtime_error("~objects_config is not set (path to the objects YAML)");
     cfg = diffdope::load_objects_config(settings_.objects_config, resolver);
-    // Class ids the objects file gives (DOPE's config_pose.yaml has them); ~class_ids, when set, wins.
-    for (const diffdope::ObjectConfig& o : cfg.objects)
-      if (o.class_id >= 0) settings_.class_ids.emplace(o.name, o.class_id);
-    // Two objects with one id would take each other's detections (the file's own are checked as it is read).
-    std::map<int64_t, std::string> owner;
-    for (const diffdope::ObjectConfig& o : cfg.objects) {
-      const auto id = settings_.class_ids.find(o.name);
-      if (id == settings_.class_ids.end()) continue;
-      const auto [it, fresh] = owner.emplace(id->second, o.name);
-      if (!fresh)
-        throw std::runtime_error("objects '" + it->second + "' and '" + o.name + "' share the class id " +
-                                 std::to_string(id->second) + " (~class_ids with " + settings_.objects_config +
-                                 "): their detections cannot be told apart; give each its own");
-    }
-    if (!cfg.detected_not_refined.empty() || !cfg.meshes_without_weights.empty()) {
-      const auto list = [](const std::vector<std::string>& names) {
-        std::string s;
-        for (const std::string& n : names) s += (s.empty() ? "" : ", ") + n;
-        return s.empty() ? std::string("none") : s;
-      };
-      const std::string line = "detected by DOPE but not refined (no mesh): " + list(cfg.detected_not_refined) +
-                               "; meshes without weights (never detected, not refined): " +
-                               list(cfg.meshes_without_weights);
-      if (cfg.meshes_without_weights.empty()) NODELET_INFO_STREAM(line);
-      else NODELET_WARN_STREAM(line);
-    }
+    // Class ids the objects file gives (DOPE's config_pose.yaml has them); ~class_ids, when set, wins. Two objects
+    // with one id would take each other's detections (the file's own are checked as it is read).
+    settings_.class_ids =
+        diffdope::object_class_ids(cfg.objects, settings_.class_ids, settings_.objects_config + " with ~class_ids");
+    const std::string unrefined = diffdope::unrefined_classes(cfg);
+    if (!unrefined.empty() && cfg.meshes_without_weights.empty()) NODELET_INFO_STREAM(unrefined);
+    else if (!unrefined.empty()) NODELET_WARN_STREAM(unrefined);
     if (cfg.input_is_rectified == false)
       NODELET_WARN_STREAM(settings_.objects_config
                           << ": input_is_rectified is False: this node projects with CameraInfo's P and never "
