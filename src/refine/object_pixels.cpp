@@ -2,6 +2,7 @@
 // planes the object stands among.
 #include "diffdope/object_pixels.hpp"
 
+#include <opencv2/core/utility.hpp>
 #include <opencv2/imgproc.hpp>
 
 #include <Eigen/Eigenvalues>
@@ -41,24 +42,38 @@ Plane fit_plane(const std::vector<Eigen::Vector3d>& points) {
 /// on at most 8000 of them), refit to its inliers. Deterministic (fixed seed): the same image gives the same
 /// pixels.
 Plane dominant_plane(const std::vector<Eigen::Vector3d>& points, double tolerance, std::mt19937& rng) {
+  constexpr int kHypotheses = 200;
   std::uniform_int_distribution<size_t> pick(0, points.size() - 1);
   // The sample's points side by side (not indices into the cloud): each hypothesis reads them from the cache.
   std::vector<Eigen::Vector3d> sample;
   const size_t n_sample = std::min<size_t>(points.size(), 8000);
   sample.reserve(n_sample);
   for (size_t k = 0; k < n_sample; ++k) sample.push_back(points[pick(rng)]);
-  Plane best;
-  size_t best_count = 0;
-  for (int h = 0; h < 200; ++h) {
+  // The hypotheses' corners drawn first, in the order one loop would draw them; their counts are then independent
+  // (scored on OpenCV's threads) and the first of the highest wins, as in that loop.
+  std::vector<Plane> planes(kHypotheses);
+  std::vector<char> valid(kHypotheses, 0);
+  for (int h = 0; h < kHypotheses; ++h) {
     const Eigen::Vector3d &a = points[pick(rng)], &b = points[pick(rng)], &c = points[pick(rng)];
     const Eigen::Vector3d n = (b - a).cross(c - a);
     if (n.norm() < 1e-9) continue;
-    Plane p{n.normalized(), 0};
-    p.offset = -p.normal.dot(a);
-    size_t count = 0;
-    for (const Eigen::Vector3d& q : sample) count += p.distance(q) <= tolerance;
-    if (count > best_count) best_count = count, best = p;
+    planes[size_t(h)] = Plane{n.normalized(), 0};
+    planes[size_t(h)].offset = -planes[size_t(h)].normal.dot(a);
+    valid[size_t(h)] = 1;
   }
+  std::vector<size_t> counts(kHypotheses, 0);
+  cv::parallel_for_(cv::Range(0, kHypotheses), [&](const cv::Range& r) {
+    for (int h = r.start; h < r.end; ++h) {
+      if (!valid[size_t(h)]) continue;
+      size_t count = 0;
+      for (const Eigen::Vector3d& q : sample) count += planes[size_t(h)].distance(q) <= tolerance;
+      counts[size_t(h)] = count;
+    }
+  });
+  Plane best;
+  size_t best_count = 0;
+  for (int h = 0; h < kHypotheses; ++h)
+    if (valid[size_t(h)] && counts[size_t(h)] > best_count) best_count = counts[size_t(h)], best = planes[size_t(h)];
   if (best_count == 0) return best;
   for (int refit = 0; refit < 2; ++refit) {
     std::vector<Eigen::Vector3d> inliers;

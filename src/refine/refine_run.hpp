@@ -100,6 +100,10 @@ class RefineRun {
   void set_polish(int iterations) { polish_iterations_ = iterations; }
   /// Rounds of Newton steps after the print alignment (RefinerOptions::newton_rounds; 0: none).
   void set_newton(int rounds) { newton_rounds_ = rounds; }
+  /// A tracked start (StartKind::kTracked) is about a frame's motion from the truth: without a mask its object's
+  /// pixels are derived once before the descent, already within the reach the fresh start's second derivation
+  /// narrows to, and then only about the result.
+  void set_tracked_start(bool tracked) { tracked_start_ = tracked; }
   /// How the print of a render registers with the image (one view with rgb; else not measured).
   PrintRegistration register_render(const RenderImage& img) const;
   /// PrintRegistration::significance() at `pose` (one render at the fine scale); NaN when not measurable (no
@@ -173,6 +177,7 @@ class RefineRun {
   double print_range_ = 0;
   int polish_iterations_ = 0;
   int newton_rounds_ = 0;
+  bool tracked_start_ = false;
   long evaluations_ = 0;          // hypothesis evaluations (and plain renders) so far, every view
   /// The last descent (RefinerOptions::polish_iterations) from res.pose, keeping the lowest loss seen.
   void polish(Renderer& renderer, RefineResult& res);

@@ -448,6 +448,7 @@ std::vector<RefineResult> Refiner::refine_pass(const RefinerOptions& options, co
                                                                   : std::min(options.print_search, kTrackedPrintSearch));
       runs[k]->set_polish(fresh ? options.polish_iterations : 0);
       runs[k]->set_newton(options.newton_rounds);
+      runs[k]->set_tracked_start(!fresh);
     } catch (const std::exception& e) {
       out[k] = failed_result(t.initial, e.what());
     }

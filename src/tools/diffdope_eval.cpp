@@ -19,6 +19,7 @@
 #include <iostream>
 #include <limits>
 #include <map>
+#include <optional>
 #include <nlohmann/json.hpp>
 #include <set>
 #include <sstream>
@@ -27,6 +28,7 @@
 #include "diffdope/coarse_mask.hpp"
 #include "diffdope/input_files.hpp"
 #include "diffdope/metrics.hpp"
+#include "diffdope/object_track.hpp"
 #include "diffdope/refiner.hpp"
 #include "diffdope/synthetic.hpp"
 #include "icp_baseline.hpp"
@@ -40,7 +42,7 @@ namespace {
 
 int usage(int rc) {
   std::cerr << "usage: diffdope_eval --bop ROOT --split NAME --perturbations DIR --out results.jsonl\n"
-               "                     [--levels easy,medium,hard] [--config FILE] [--summary-json FILE]\n"
+               "                     [--levels easy,medium,hard,tracking] [--config FILE] [--summary-json FILE]\n"
                "                     [--threads N] [--max-samples N] [--generate N [--seed S]] [--device auto|cpu|cuda]\n"
                "                     [--symmetric ID,ID,...|none]  (instead of ROOT/models/models_info.json)\n"
                "                     [--masks given|none|box|coarse[:SEED]]  given: the visible masks (default); none: no\n"
@@ -51,6 +53,8 @@ int usage(int rc) {
                "                     node with use_depth false)\n"
                "                     [--method refiner|icp]  icp: the baseline, point-to-plane ICP on the depth near\n"
                "                     the start (the mask's, or the object's pixels derived there), no verdict\n"
+               "                     [--track-budget B,I]  the tracking level's starts refined as the node refines a\n"
+               "                     steady track's (B runs of I iterations, tracked_options(); 0: the refiner's)\n"
                "Exit status: 0 all samples evaluated, 1 an error or some samples skipped, 2 bad arguments.\n";
   return rc;
 }
@@ -152,6 +156,7 @@ int main(int argc, char** argv) {
   std::set<std::string> levels;
   int threads = 0, max_samples = -1, generate = 0;
   uint64_t seed = 1, coarse_seed = 1;
+  std::optional<TrackOptions> track_budget;
   try {
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
@@ -189,11 +194,18 @@ int main(int argc, char** argv) {
     } else if (a == "--method") {
       if (v != "refiner" && v != "icp") throw std::invalid_argument("--method: unknown method '" + v + "' (refiner, icp)");
       method = v;
+    } else if (a == "--track-budget") {
+      const size_t comma = v.find(',');
+      if (comma == std::string::npos) throw std::invalid_argument("--track-budget: expected B,I (e.g. 8,20)");
+      track_budget.emplace();
+      track_budget->batch_size = int(parse_integer_arg(a + " B", v.substr(0, comma), 0, RefinerOptions::kMaxBatchSize));
+      track_budget->iterations =
+          int(parse_integer_arg(a + " I", v.substr(comma + 1), 0, RefinerOptions::kMaxIterations));
     } else if (a == "--levels") {
       std::stringstream ss(v);
       for (std::string l; std::getline(ss, l, ',');) {
-        if (l != "easy" && l != "medium" && l != "hard")
-          throw std::invalid_argument("--levels: unknown level '" + l + "' (easy, medium, hard)");
+        if (l != "easy" && l != "medium" && l != "hard" && l != "tracking")
+          throw std::invalid_argument("--levels: unknown level '" + l + "' (easy, medium, hard, tracking)");
         levels.insert(l);
       }
     } else {
@@ -319,7 +331,17 @@ int main(int argc, char** argv) {
             const IcpResult icp = icp_refine(*icp_renderer, img.camera, obs, mesh, p.pose);
             r.pose = icp.pose, r.time_ms = icp.time_ms, r.error = icp.error, r.learning_rates = {0.0}, r.winner = 0;
           } else {
-            r = refiner.refine(img.camera, obs, mesh, p.pose);
+            if (track_budget && level == "tracking") {  // as the node refines a steady track
+              ObjectTarget t;
+              t.mesh = &mesh;
+              t.initial = p.pose;
+              t.mask = obs.mask;
+              t.box = obs.box;
+              t.start_kind = StartKind::kTracked;
+              r = refiner.refine_all(img.camera, obs, {t}, tracked_options(options, *track_budget)).front();
+            } else {
+              r = refiner.refine(img.camera, obs, mesh, p.pose);
+            }
           }
           if (!r.error.empty()) {
             std::cerr << "\ndiffdope_eval: " << file.string() << " sample " << p.sample << ": obj " << p.obj_id

@@ -7,6 +7,7 @@
 #include "diffdope/device.hpp"
 #include "diffdope/metrics.hpp"
 #include "diffdope/object_pixels.hpp"
+#include "diffdope/object_track.hpp"
 #include "diffdope/primitives.hpp"
 #include "diffdope/procedural.hpp"
 #include "diffdope/refiner.hpp"
@@ -314,6 +315,31 @@ TEST(ObjectPixels, FromColourAColourNeitherRegionShowsIsUndecided) {
   ASSERT_FALSE(q.empty());
   EXPECT_GT(q.at<float>(100, 100), 0.5f);
   EXPECT_LT(q.at<float>(100, 65), 0.5f);
+}
+
+// A steady track's start is a frame's motion from the truth: refined on the track's budget (tracked_options()), its
+// object's pixels derived from depth once before the descent and once about the result, it converges as closely
+// among the table, the neighbour and the post as a start refined with the full budget.
+TEST(ObjectPixels, ATrackedStartWithoutAMaskConvergesOnTheTrackBudget) {
+  const ClutteredScene s = make_cluttered_scene(3);
+  const std::vector<Eigen::Vector3d> points = metric_points(s.object);
+  std::mt19937_64 rng(11);
+  for (int k = 0; k < 3; ++k) {
+    const Pose start = perturb_pose(s.truth, s.object.center(), 1.5 * M_PI / 180, 0.004, rng);
+    ObjectTarget t;
+    t.mesh = &s.object;
+    t.initial = start;
+    t.start_kind = StartKind::kTracked;
+    Refiner refiner(test_options());
+    const RefineResult tracked = refiner.refine_all(s.cam, s.obs, {t}, tracked_options(test_options(), TrackOptions()))[0];
+    const RefineResult full = refiner.refine(s.cam, s.obs, s.object, start);
+    ASSERT_TRUE(tracked.error.empty()) << tracked.error;
+    EXPECT_TRUE(tracked.plausible) << "start " << k;
+    const double add_tracked = 1e3 * add_error(points, tracked.pose, s.truth);
+    EXPECT_LT(add_tracked, 1.0) << "start " << k << " from " << 1e3 * add_error(points, start, s.truth) << " mm";
+    EXPECT_LT(add_tracked, 1e3 * add_error(points, full.pose, s.truth) + 0.5) << "start " << k;
+    EXPECT_LT(tracked.evaluations, full.evaluations / 2) << "start " << k;
+  }
 }
 
 // A colour image registered to depth with an error (the generator's colour offset: colour moves, depth and masks

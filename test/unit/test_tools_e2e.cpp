@@ -200,6 +200,10 @@ TEST(ToolsEndToEnd, EvalFailsLoudlyWhenItCannotEvaluateEverything) {
   EXPECT_NE(said().find("unknown level 'bogus'"), std::string::npos) << said();
   EXPECT_EQ(eval("--perturbations " + (tmp.path / "p").string() + " --max-samples 3x"), 2);
   EXPECT_NE(said().find("--max-samples: expected an integer, got '3x'"), std::string::npos) << said();
+  EXPECT_EQ(eval("--perturbations " + (tmp.path / "p").string() + " --track-budget 8"), 2);
+  EXPECT_NE(said().find("--track-budget: expected B,I"), std::string::npos) << said();
+  EXPECT_EQ(eval("--perturbations " + (tmp.path / "p").string() + " --track-budget 8,x"), 2);
+  EXPECT_NE(said().find("--track-budget I: expected an integer, got 'x'"), std::string::npos) << said();
   // Works, then a model goes missing: the samples of its object are skipped, said, and the exit status says so.
   ASSERT_EQ(eval("--perturbations " + (tmp.path / "p").string() + " --generate 1 --levels easy"), 0) << said();
   fs::rename(root + "/models/obj_000001.ply", root + "/models/obj_000001.ply.gone");
