@@ -323,9 +323,10 @@ void RefineRun::update_object_pixels(Renderer& renderer) {
     scan_loss_.weight_mask *= kDerivedMaskWeight;
     res_.loss_used.weight_mask *= kDerivedMaskWeight;
   } else if (derivations_ == 0) {
-    derivations_ = tracked_start_ ? 2 : 1;
-    if (derive_pixels(renderer, initials_, std::max(tracked_start_ ? reach / 3 : reach, options_.inlier_threshold)))
-      return;
+    // (From colour alone, deriving once cost two of bench_tracking's three objects accuracy: it keeps all three.)
+    const bool once = tracked_start_ && !pixels_from_colour_;
+    derivations_ = once ? 2 : 1;
+    if (derive_pixels(renderer, initials_, std::max(once ? reach / 3 : reach, options_.inlier_threshold))) return;
     // Nothing near the starts in depth (or no colour likely the object's): the window stays, and it is no
     // observation of the silhouette.
     derives_pixels_ = has_mask_ = false;

@@ -101,8 +101,8 @@ class RefineRun {
   /// Rounds of Newton steps after the print alignment (RefinerOptions::newton_rounds; 0: none).
   void set_newton(int rounds) { newton_rounds_ = rounds; }
   /// A tracked start (StartKind::kTracked) is about a frame's motion from the truth: without a mask its object's
-  /// pixels are derived once before the descent, already within the reach the fresh start's second derivation
-  /// narrows to, and then only about the result.
+  /// pixels are derived from depth once before the descent, already within the reach the fresh start's second
+  /// derivation narrows to, and then only about the result.
   void set_tracked_start(bool tracked) { tracked_start_ = tracked; }
   /// How the print of a render registers with the image (one view with rgb; else not measured).
   PrintRegistration register_render(const RenderImage& img) const;
