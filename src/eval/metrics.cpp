@@ -50,8 +50,6 @@ double accuracy_auc(const std::vector<double>& errors, double max_threshold) {
   return 100.0 * area / (max_threshold * errors.size());
 }
 
-
-
 Vector6d pose_error_twist(const Pose& estimate, const Pose& truth, const Eigen::Vector3d& pivot_model) {
   Vector6d e;
   e.head<3>() = truth * pivot_model - estimate * pivot_model;

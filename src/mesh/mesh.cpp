@@ -294,8 +294,8 @@ bool lods_built() {
 
 void Mesh::build_lods() {
   lods_.clear();
-  if (num_triangles() <= kLodMinTriangles || !lods_built()) return;
-#ifdef DIFFDOPE_WITH_MESHOPTIMIZER
+#ifdef DIFFDOPE_WITH_MESHOPTIMIZER  // (without it, no levels: lods_built())
+  if (num_triangles() <= kLodMinTriangles) return;
   // meshoptimizer keeps vertices shared by triangles of different textures apart by simplifying each texture's
   // triangles on their own, with their outline locked (colour seams between textures stay where they are).
   // Meshes are often stored as triangle soups (3 vertices per triangle, as many PLY exporters write them):

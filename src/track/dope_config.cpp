@@ -16,12 +16,6 @@ constexpr const char* kDopeKeys[] = {"meshes", "weights", "dimensions", "class_i
 /// A cuboid side in DOPE's `dimensions` (centimetres) beyond this is no object a camera refines.
 constexpr double kMaxDimensionCm = 1e4;
 
-std::string joined(const std::vector<std::string>& names) {
-  std::string s;
-  for (const std::string& n : names) s += (s.empty() ? "" : ", ") + n;
-  return s;
-}
-
 /// The entries of a DOPE map `key` (object name -> value); an absent or empty map (every line of it commented
 /// out, as DOPE ships `meshes`) is empty.
 std::map<std::string, YAML::Node> entries(const YAML::Node& root, const char* key, const std::string& origin) {

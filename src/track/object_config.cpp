@@ -145,6 +145,12 @@ void check_object(ObjectConfig& o, const std::string& entry, const std::string& 
   if (!o.symmetries.empty()) o.symmetric = true;  // declared symmetries are scored with ADD-S too
 }
 
+std::string joined(const std::vector<std::string>& names) {
+  std::string s;
+  for (const std::string& n : names) s += (s.empty() ? "" : ", ") + n;
+  return s;
+}
+
 }  // namespace detail
 
 std::map<std::string, int64_t> object_class_ids(const std::vector<ObjectConfig>& objects,
@@ -167,9 +173,7 @@ std::map<std::string, int64_t> object_class_ids(const std::vector<ObjectConfig>&
 std::string unrefined_classes(const ObjectsConfig& cfg) {
   if (cfg.detected_not_refined.empty() && cfg.meshes_without_weights.empty()) return "";
   const auto list = [](const std::vector<std::string>& names) {
-    std::string s;
-    for (const std::string& n : names) s += (s.empty() ? "" : ", ") + n;
-    return s.empty() ? std::string("none") : s;
+    return names.empty() ? std::string("none") : detail::joined(names);
   };
   return "detected by DOPE but not refined (no mesh): " + list(cfg.detected_not_refined) +
          "; meshes without weights (never detected, not refined): " + list(cfg.meshes_without_weights);
