@@ -8,7 +8,7 @@
 //
 //   bench_tracking [--objects 1|2|3] [--frames N (90)] [--rate HZ (30)] [--every K (2)] [--detector-every K (3)]
 //                  [--latency S (0.15)] [--masks given|none] [--depth given|none] [--config FILE] [--seed S (1)]
-//                  [--track-budget B,I (TrackOptions': 8,20)] [--quiet]
+//                  [--track-budget B,I (TrackOptions': 4,10)] [--quiet]
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -50,7 +50,7 @@ struct Args {
   std::cerr << "bench_tracking: " << why << "\n"
             << "usage: bench_tracking [--objects 1|2|3] [--frames N (90)] [--rate HZ (30)] [--every K (2)]\n"
                "                      [--detector-every K (3)] [--latency S (0.15)] [--masks given|none]\n"
-               "                      [--depth given|none] [--config FILE] [--seed S (1)] [--track-budget B,I (8,20)]\n"
+               "                      [--depth given|none] [--config FILE] [--seed S (1)] [--track-budget B,I (4,10)]\n"
                "                      [--quiet]\n";
   std::exit(2);
 }
@@ -159,6 +159,7 @@ int main(int argc, char** argv) {
         t.initial = starts.front().pose;
         for (size_t j = 1; j < starts.size(); ++j) t.alternatives.push_back(starts[j].pose);
         t.start_kind = start_kind(starts);
+        if (t.start_kind == StartKind::kTracked) t.carried_curvature = tracks[i].carried_curvature();
         if (args.masks) t.mask = scene.visible_masks[i];
         all_steady = all_steady && t.start_kind == StartKind::kTracked && tracks[i].steady(stamp);
         targets.push_back(t);
@@ -174,6 +175,7 @@ int main(int argc, char** argv) {
         const size_t i = target_object[n];
         const Pose reported = tracks[i].reported_pose(results[n].pose, objects[i].mesh.symmetry);
         tracks[i].report(reported, results[n].plausible, stamp);
+        tracks[i].note_curvature(results[n].curvature, results[n].curvature_carried, reported);
         const double rot = rotation_deg(reported, truth[i]);
         const Eigen::AngleAxisd err(truth[i].R.transpose() * reported.R);  // in the model's frame
         const double about_z = err.angle() * err.axis().z() * 180.0 / M_PI;

@@ -40,6 +40,10 @@ class InstanceTracks {
   /// The instance's refinement outcome (ObjectTrack::report); a plausible pose is its last known position.
   /// Returns true when this loses the instance's track (the instance is then free).
   bool report(int instance, const Pose& refined, bool plausible, double stamp);
+  /// After report(): the instance's ObjectTrack::note_curvature().
+  void note_curvature(int instance, const PoseCurvature& curvature, bool carried, const Pose& reported) {
+    instances_.at(size_t(instance)).track.note_curvature(curvature, carried, reported);
+  }
 
   void set_options(const TrackOptions& options);
   void reset();

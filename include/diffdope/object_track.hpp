@@ -23,10 +23,15 @@ struct TrackOptions {
   bool predict = true;
   double max_extrapolation = 2.0;    // extrapolate at most this multiple of the last interval
   /// Budget of a refinement whose targets all start from steady tracks (tracked_options()): B runs and iterations
-  /// (0: the refiner's own). A track is a frame from the truth, so a quarter of a detection's budget does, the
-  /// Newton steps converging what the descent leaves short (bench_tracking; docs/benchmarks.md).
-  int batch_size = 8;                // [0, RefinerOptions::kMaxBatchSize]
-  int iterations = 20;               // [0, RefinerOptions::kMaxIterations]
+  /// (0: the refiner's own). A track is a frame from the truth, so an eighth of a detection's budget does, the
+  /// Newton steps converging what the descent leaves short (bench_tracking, dev_real's tracking level;
+  /// docs/benchmarks.md).
+  int batch_size = 4;                // [0, RefinerOptions::kMaxBatchSize]
+  int iterations = 10;               // [0, RefinerOptions::kMaxIterations]
+  /// Frames of a steady track that one probe of the loss's curvature (the covariance) serves, the one it was
+  /// measured on included; the others carry it with the pose (ObjectTrack::carried_curvature(),
+  /// carry_pose_curvature()). 1: probed on every frame.
+  int covariance_frames = 5;         // [1, 1000]
   /// Ranges: ages and timeouts [0, 3600] s, max_failures [1, 1000], max_extrapolation [0, 100]. Throws
   /// std::invalid_argument naming the first field outside its range (names as the node's parameters).
   void validate() const;
@@ -92,6 +97,14 @@ class ObjectTrack {
   /// The outcome of refining the frame stamped `image_stamp`. Returns true when this loses the track.
   bool report(const Pose& refined, bool plausible, double image_stamp);
 
+  /// After report(): the curvature the refinement measured (RefineResult::curvature; `carried`:
+  /// RefineResult::curvature_carried) at `reported`, the pose given to report(). A measured one is kept for
+  /// carried_curvature(), a carried one counts a frame of the kept one's use, an invalid one drops it.
+  void note_curvature(const PoseCurvature& curvature, bool carried, const Pose& reported);
+  /// The curvature to carry to the next frame: the kept one, while the track is live and it has served fewer
+  /// than TrackOptions::covariance_frames frames; else nothing (the next frame probes it).
+  std::optional<MeasuredCurvature> carried_curvature() const;
+
   /// The pose to report for `refined` (call before report()), of an object with declared `symmetry`: of its
   /// equivalent poses, the one nearest the track's last pose, so a tracked symmetric object does not spin or flip
   /// between frames even when a fresh detection does; without a track, the canonical one (symmetry.hpp).
@@ -123,6 +136,8 @@ class ObjectTrack {
   std::optional<Seed> previous_;   // the one before (constant-velocity prediction)
   Eigen::Vector3d pivot_;
   int failures_ = 0;
+  std::optional<MeasuredCurvature> curvature_;  // the last measured (note_curvature())
+  int curvature_frames_ = 0;                    // frames it has served
 };
 
 }  // namespace diffdope

@@ -49,6 +49,9 @@ Eigen::Matrix<double, 6, Eigen::Dynamic> complement_of(const std::vector<Vector6
 /// that length, −(H + λI)⁻¹ g (the trust-region step). Zero when no direction curves upwards or the input is not
 /// finite.
 Vector6d newton_step(const Matrix6d& Hq, const Vector6d& gq, double trust, const std::vector<Vector6d>& free = {});
+/// The loss decrease the quadratic model (Hq, gq, whitened as newton_step()'s) predicts for its untrusted Newton
+/// step, −(gᵀs + ½ sᵀHs) ≥ 0; 0 when newton_step() gives none.
+double newton_decrease(const Matrix6d& Hq, const Vector6d& gq, const std::vector<Vector6d>& free = {});
 
 /// One image of a probed pose. Several views share the pose (a calibration's captures: one camera <- base, the
 /// robot in each capture's configuration); the probe weighs their mean loss, as Refiner::refine_views() does.
@@ -91,6 +94,22 @@ PoseCurvature probe_pose_curvature(Renderer& renderer, const Camera& camera, con
 PoseCurvature probe_pose_curvature(Renderer& renderer, const std::vector<ProbeView>& views, const LossOptions& loss,
                                    const Pose& pose, const Eigen::Vector3d& pivot_model, double distance,
                                    const std::vector<Vector6d>& free_twists = {});
+
+/// The curvature `measured` at `measured_at` (an earlier frame of a tracked object), carried to `pose`: its
+/// Hessian turned with the object (in the object's axes, about the pivot, the loss keeps its shape over a frame's
+/// motion), the metric, the loss at `pose` and the rise along the weakest direction measured again: 3 evaluations
+/// without gradients per view instead of kCurvatureProbeEvaluations. Not valid when `measured` is not.
+PoseCurvature carry_pose_curvature(Renderer& renderer, const std::vector<ProbeView>& views, const LossOptions& loss,
+                                   const PoseCurvature& measured, const Pose& measured_at, const Pose& pose,
+                                   const Eigen::Vector3d& pivot_model, double distance,
+                                   const std::vector<Vector6d>& free_twists = {});
+/// Evaluations of carry_pose_curvature() per view.
+constexpr int kCarriedCurvatureEvaluations = 3;
+/// A curvature a frame measured (RefineResult::curvature) and the pose it was measured at, to carry to the next.
+struct MeasuredCurvature {
+  PoseCurvature curvature;
+  Pose pose;
+};
 
 
 /// A covariance of the pose from the loss's curvature (a Laplace approximation). The loss, a mean of L1

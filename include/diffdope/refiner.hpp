@@ -104,7 +104,9 @@ struct RefinerOptions {
   /// the Newton step on it, damped to at most 2h (trust region). The best is taken when it lowers the loss by more
   /// than noise would (3 nats of the covariance's noise model, pose_covariance()). A round whose whole step the
   /// trust radius held back doubles h (the valley goes on; up to a quarter of the diameter), any other halves it;
-  /// a round without a clear gain ends the rounds, or is tried again at half h when h had grown. Plain
+  /// a round without a clear gain ends the rounds, or is tried again at half h when h had grown, and so does a
+  /// step after which the round's quadratic model, from the gradient where it ended, promises less than a step
+  /// needs (the next round is not probed). Plain
   /// gradient steps are bounded by the stiffest direction (a thin object across its width), so softer ones (its
   /// roll) are still converging when the iterations end (docs/benchmarks.md). When the steps lowered the loss by
   /// more than kPrintLossTolerance, the print alignment runs once more at the converged pose. 0 = off (the paper's
@@ -288,6 +290,7 @@ struct RefineResult {
   PrintRegistration print;            // whether the print lines up at the refined pose (ncc = -1: not measured)
   PoseCurvature curvature;            // the loss around the refined pose (valid = false when not probed:
                                       // probe_distance = 0, or a probe left the image)
+  bool curvature_carried = false;     // the curvature is ObjectTarget::carried_curvature's, carried to the pose
   /// From the curvature (pose_covariance()): of the twist about `pivot` (v m, w rad, camera axes); zero when not
   /// probed. covariance_at_origin(covariance, pivot, frame_origin) gives ROS's PoseWithCovariance layout.
   Matrix6d covariance = Matrix6d::Zero();
@@ -333,6 +336,9 @@ struct ObjectTarget {
   std::vector<Pose> alternatives;  // further initial poses; the runs are shared out among all of them
   StartKind start_kind = StartKind::kFresh;  // (start_kind() in object_track.hpp gives a track's)
   cv::Rect box;  // without a mask: a detector's 2D box around it (Observation::box); may be empty
+  /// A tracked start (start_kind kTracked) only: the curvature an earlier frame of the track measured
+  /// (ObjectTrack::carried_curvature()), carried to the result (carry_pose_curvature()) instead of probed again.
+  std::optional<MeasuredCurvature> carried_curvature;
 };
 
 class RefineRun;  // (src/refine/refine_run.hpp)

@@ -119,69 +119,120 @@ Vector6d newton_step(const Matrix6d& Hq, const Vector6d& gq, double trust, const
   return basis * x;
 }
 
+double newton_decrease(const Matrix6d& Hq, const Vector6d& gq, const std::vector<Vector6d>& free) {
+  const Vector6d s = newton_step(Hq, gq, std::numeric_limits<double>::infinity(), free);
+  return std::max(0.0, -(gq.dot(s) + 0.5 * s.dot(Hq * s)));
+}
+
 PoseCurvature probe_pose_curvature(Renderer& renderer, const Camera& camera, const Mesh& mesh,
                                    const Observation& observed, const LossOptions& loss, const Pose& pose,
                                    double distance, const std::vector<Vector6d>& free_twists) {
   return probe_pose_curvature(renderer, {{camera, mesh, observed}}, loss, pose, mesh.center(), distance, free_twists);
 }
 
-PoseCurvature probe_pose_curvature(Renderer& renderer, const std::vector<ProbeView>& views, const LossOptions& loss,
-                                   const Pose& pose, const Eigen::Vector3d& pivot_model, double distance,
-                                   const std::vector<Vector6d>& free_twists) {
-  PoseCurvature out;
-  if (views.empty()) return out;
-  const double n_views = double(views.size());
-  const Eigen::Vector3d pivot = pose * pivot_model;
-  Matrix6d metric = Matrix6d::Zero();
-  for (const ProbeView& view : views) metric += surface_displacement_metric(view.mesh, pose.R, pivot_model);
-  out.metric = metric / n_views;
-  const Eigen::LLT<Matrix6d> llt(out.metric);
-  if (llt.info() != Eigen::Success || !(distance > 0)) return out;
-  const Matrix6d L = llt.matrixL();
-  const Matrix6d Linv = L.inverse();  // whitened q = Lᵀ δ: |q| = RMS surface displacement
-  const Matrix6d LinvT = Linv.transpose();
-  const double h = 0.5 * distance;
+namespace {
 
-  const std::vector<Pose> probes = secant_probe_poses(pose, LinvT, h, pivot);
-  // The views' mean loss and gradient (about the pivot) at each probe.
-  std::vector<double> totals(probes.size(), 0.0);
-  std::vector<Vector6d> gradients(probes.size(), Vector6d::Zero());
+/// The views' mean loss (and, with gradients, its gradient about `pivot`) at each of `poses`.
+void mean_over_views(Renderer& renderer, const std::vector<ProbeView>& views, const LossOptions& loss,
+                     const std::vector<Pose>& poses, const Eigen::Vector3d& pivot, bool with_gradient,
+                     std::vector<double>& totals, std::vector<Vector6d>& gradients) {
+  totals.assign(poses.size(), 0.0);
+  gradients.assign(poses.size(), Vector6d::Zero());
   std::vector<LossValue> v;
   for (const ProbeView& view : views) {
-    renderer.evaluate(view.camera, view.mesh, view.observed, probes, loss, true, v);
-    for (size_t k = 0; k < probes.size(); ++k) {
+    renderer.evaluate(view.camera, view.mesh, view.observed, poses, loss, with_gradient, v);
+    for (size_t k = 0; k < poses.size(); ++k) {
       totals[k] += v[k].total;
-      gradients[k] += gradient_about(v[k].gradient, pivot);
+      if (with_gradient) gradients[k] += gradient_about(v[k].gradient, pivot);
     }
   }
-  for (size_t k = 0; k < probes.size(); ++k) totals[k] /= n_views, gradients[k] /= n_views;
-  out.loss = totals[12];
-  for (const double t : totals)
-    if (!std::isfinite(t)) return out;
-  const Matrix6d Hq = secant_hessian(gradients, Linv, h);
-  out.hessian = L * Hq * L.transpose();
+  for (size_t k = 0; k < poses.size(); ++k) totals[k] /= double(views.size()), gradients[k] /= double(views.size());
+}
 
+/// The metric of `views` at `pose` (their mean) into out.metric; false when it is degenerate.
+bool set_metric(const std::vector<ProbeView>& views, const Pose& pose, const Eigen::Vector3d& pivot_model,
+                PoseCurvature& out) {
+  Matrix6d metric = Matrix6d::Zero();
+  for (const ProbeView& view : views) metric += surface_displacement_metric(view.mesh, pose.R, pivot_model);
+  out.metric = metric / double(views.size());
+  return Eigen::LLT<Matrix6d>(out.metric).info() == Eigen::Success;
+}
+
+/// From the whitened Hessian `Hq` (q = Lᵀ δ: |q| = RMS surface displacement, out.metric = L Lᵀ): the curvatures
+/// and the weakest direction in the complement of the free twists, and the rise along it (`loss_at`: the mean
+/// loss at poses) above out.loss.
+template <class LossAt>
+void finish_curvature(PoseCurvature& out, const Matrix6d& Hq, const Pose& pose, const Eigen::Vector3d& pivot,
+                      double distance, const std::vector<Vector6d>& free_twists, const LossAt& loss_at) {
+  const Matrix6d L = Eigen::LLT<Matrix6d>(out.metric).matrixL();
+  const Matrix6d LinvT = L.inverse().transpose();
   // The directions a declared symmetry leaves free are not weaknesses of the data: search their complement.
   std::vector<Vector6d> free_whitened;
   for (const Vector6d& f : free_twists) free_whitened.push_back(L.transpose() * f);
   const Eigen::Matrix<double, 6, Eigen::Dynamic> U = complement_of(free_whitened);
   const Eigen::MatrixXd Hs = U.transpose() * Hq * U;
   const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eig(Hs);
-  if (eig.info() != Eigen::Success || Hs.rows() == 0) return out;
+  if (eig.info() != Eigen::Success || Hs.rows() == 0) return;
   out.curvatures.setConstant(std::numeric_limits<double>::infinity());
   for (int i = 0; i < int(Hs.rows()); ++i) out.curvatures[i] = eig.eigenvalues()[i];
   const Vector6d u = U * eig.eigenvectors().col(0);
   out.weakest_twist = LinvT * u;
-
-  const std::vector<Pose> sides{twist_about(pose, distance * out.weakest_twist, pivot),
-                                twist_about(pose, -distance * out.weakest_twist, pivot)};
-  double plus = 0, minus = 0;
-  for (const ProbeView& view : views) {
-    renderer.evaluate(view.camera, view.mesh, view.observed, sides, loss, false, v);
-    plus += v[0].total, minus += v[1].total;
-  }
-  out.weakest_rise = std::min(plus / n_views, minus / n_views) - out.loss;
+  const std::vector<double> sides = loss_at({twist_about(pose, distance * out.weakest_twist, pivot),
+                                             twist_about(pose, -distance * out.weakest_twist, pivot)});
+  out.weakest_rise = std::min(sides[0], sides[1]) - out.loss;
   out.valid = std::isfinite(out.weakest_rise);
+}
+
+}  // namespace
+
+PoseCurvature probe_pose_curvature(Renderer& renderer, const std::vector<ProbeView>& views, const LossOptions& loss,
+                                   const Pose& pose, const Eigen::Vector3d& pivot_model, double distance,
+                                   const std::vector<Vector6d>& free_twists) {
+  PoseCurvature out;
+  if (views.empty() || !set_metric(views, pose, pivot_model, out) || !(distance > 0)) return out;
+  const Eigen::Vector3d pivot = pose * pivot_model;
+  const Matrix6d L = Eigen::LLT<Matrix6d>(out.metric).matrixL();
+  const Matrix6d Linv = L.inverse();
+  const double h = 0.5 * distance;
+  std::vector<double> totals;
+  std::vector<Vector6d> gradients;
+  mean_over_views(renderer, views, loss, secant_probe_poses(pose, Linv.transpose(), h, pivot), pivot, true, totals,
+                  gradients);
+  out.loss = totals.back();
+  for (const double t : totals)
+    if (!std::isfinite(t)) return out;
+  const Matrix6d Hq = secant_hessian(gradients, Linv, h);
+  out.hessian = L * Hq * L.transpose();
+  finish_curvature(out, Hq, pose, pivot, distance, free_twists, [&](const std::vector<Pose>& poses) {
+    std::vector<Vector6d> unused;
+    mean_over_views(renderer, views, loss, poses, pivot, false, totals, unused);
+    return totals;
+  });
+  return out;
+}
+
+PoseCurvature carry_pose_curvature(Renderer& renderer, const std::vector<ProbeView>& views, const LossOptions& loss,
+                                   const PoseCurvature& measured, const Pose& measured_at, const Pose& pose,
+                                   const Eigen::Vector3d& pivot_model, double distance,
+                                   const std::vector<Vector6d>& free_twists) {
+  PoseCurvature out;
+  if (!measured.valid || views.empty() || !set_metric(views, pose, pivot_model, out) || !(distance > 0)) return out;
+  // The twist about the pivot in the object's axes is (Rᵀ v, Rᵀ w): the Hessian turns with the object.
+  Matrix6d turn = Matrix6d::Zero();
+  turn.topLeftCorner<3, 3>() = turn.bottomRightCorner<3, 3>() = pose.R * measured_at.R.transpose();
+  out.hessian = turn * measured.hessian * turn.transpose();
+  const Eigen::Vector3d pivot = pose * pivot_model;
+  std::vector<double> totals;
+  std::vector<Vector6d> unused;
+  mean_over_views(renderer, views, loss, {pose}, pivot, false, totals, unused);
+  out.loss = totals[0];
+  if (!std::isfinite(out.loss)) return out;
+  const Matrix6d Linv = Eigen::LLT<Matrix6d>(out.metric).matrixL().toDenseMatrix().inverse();
+  finish_curvature(out, Linv * out.hessian * Linv.transpose(), pose, pivot, distance, free_twists,
+                   [&](const std::vector<Pose>& poses) {
+    mean_over_views(renderer, views, loss, poses, pivot, false, totals, unused);
+    return totals;
+  });
   return out;
 }
 

@@ -125,16 +125,18 @@ void RefineRun::newton(Renderer& renderer, RefineResult& res) {
     const bool probed = std::all_of(v.begin(), v.end(), [](const LossValue& x) { return std::isfinite(x.total); });
     Vector6d step = Vector6d::Zero();  // (zero: a probe left the image, or nothing curves upwards)
     const double trust = kNewtonTrustPerReach * h;
+    Matrix6d Hq = Matrix6d::Zero();
     if (probed) {
       for (int k = 0; k < kSecantProbePoses; ++k) gradients[size_t(k)] = gradient_about(v[size_t(k)].gradient, pivot);
-      step = newton_step(secant_hessian(gradients, Linv, h), Linv * gradients.back(), trust, free);
+      Hq = secant_hessian(gradients, Linv, h);
+      step = newton_step(Hq, Linv * gradients.back(), trust, free);
     }
     std::vector<Pose> poses;
     size_t best = 0;
     double gain = 0;
     if (!step.isZero()) {
       for (const double share : kNewtonStepShares) poses.push_back(twist_about(res.pose, share * (LinvT * step), pivot));
-      evaluate_fine(renderer, poses, loss_, Gradients::kSkip, tried);
+      evaluate_fine(renderer, poses, loss_, Gradients::kCompute, tried);
       for (size_t j = 1; j < poses.size(); ++j)
         if (std::isfinite(tried[j].total) && !(tried[best].total <= tried[j].total)) best = j;  // (never a non-finite one)
       gain = residuals * (res.loss.total - tried[best].total) / std::max(res.loss.total, 1e-12);
@@ -148,6 +150,12 @@ void RefineRun::newton(Renderer& renderer, RefineResult& res) {
     res.loss = tried[best];
     ++res.newton_steps;
     const bool held_back = best + 1 == poses.size() && step.norm() >= (1.0 - 1e-3) * trust;
+    // Another round gains at most what this round's quadratic model promises from the gradient where the step
+    // ended (the secant underestimates the curvature of the L1 terms' kinks, so the promise is generous): below
+    // the evidence a step needs, the round is not made. A step the trust radius held back has its valley ahead.
+    const Vector6d g_next = Linv * gradient_about(res.loss.gradient, res.pose * pivot_model_);
+    const double promised = residuals * newton_decrease(Hq, g_next, free) / std::max(res.loss.total, 1e-12);
+    if (!held_back && promised < kNewtonEvidence) return;
     h = held_back ? std::min(2 * h, max_reach) : 0.5 * h;
   }
 }
@@ -239,7 +247,7 @@ RefineRun::Candidate RefineRun::start_candidate() {
 
 void RefineRun::derive_pixels_at_result(Renderer& renderer, Candidate& c) {
   RefineResult& res = c.result;
-  if (!derives_pixels_ || !std::isfinite(res.loss.total) ||
+  if (!derives_pixels_ || derives_once() || !std::isfinite(res.loss.total) ||
       !derive_pixels(renderer, {res.pose}, options_.inlier_threshold))
     return;
   // The object's pixels about the chosen result, within what the verdict calls an inlier: the polish, the print
@@ -464,6 +472,15 @@ int RefineRun::score_views(Renderer& renderer, RefineResult& res) {
 void RefineRun::probe_curvature(Renderer& renderer, RefineResult& res) {
   const double distance = options_.probe_distance;
   if (!(distance > 0) || !std::isfinite(res.loss.total)) return;
+  if (meshes_.size() == 1 && carried_curvature_) {
+    const Mesh& mesh = *meshes_[0];
+    res.curvature = carry_pose_curvature(renderer, {{fine_[0].cam, mesh, fine_[0].obs}}, loss_,
+                                         carried_curvature_->curvature, carried_curvature_->pose, res.pose,
+                                         mesh.center(), distance, mesh.symmetry.free_twists(res.pose, res.pose * mesh.center()));
+    res.curvature_carried = true;
+    evaluations_ += kCarriedCurvatureEvaluations;
+    return;
+  }
   if (meshes_.size() == 1) {
     const Mesh& mesh = *meshes_[0];
     res.curvature = probe_pose_curvature(renderer, fine_[0].cam, mesh, fine_[0].obs, loss_, res.pose, distance,

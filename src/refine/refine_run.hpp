@@ -4,6 +4,7 @@
 // !done(), next_step(), evaluate the step (the driver, or evaluate_step()), absorb(); then finish().
 #include <chrono>
 #include <functional>
+#include <optional>
 #include <vector>
 
 #include "diffdope/refiner.hpp"
@@ -100,10 +101,13 @@ class RefineRun {
   void set_polish(int iterations) { polish_iterations_ = iterations; }
   /// Rounds of Newton steps after the print alignment (RefinerOptions::newton_rounds; 0: none).
   void set_newton(int rounds) { newton_rounds_ = rounds; }
-  /// A tracked start (StartKind::kTracked) is about a frame's motion from the truth: without a mask its object's
-  /// pixels are derived from depth once before the descent, already within the reach the fresh start's second
-  /// derivation narrows to, and then only about the result.
+  /// A tracked start (StartKind::kTracked) is about a frame's motion from the truth: its object's pixels (without
+  /// a mask, or to check a given one) are derived from depth once, about the starts and within
+  /// RefinerOptions::inlier_threshold, where a fresh start's are narrowed to only about its result.
   void set_tracked_start(bool tracked) { tracked_start_ = tracked; }
+  /// The curvature an earlier frame measured (ObjectTarget::carried_curvature): carried to the result instead of
+  /// probed (one view only).
+  void set_carried_curvature(std::optional<MeasuredCurvature> carried) { carried_curvature_ = std::move(carried); }
   /// How the print of a render registers with the image (one view with rgb; else not measured).
   PrintRegistration register_render(const RenderImage& img) const;
   /// PrintRegistration::significance() at `pose` (one render at the fine scale); NaN when not measurable (no
@@ -158,6 +162,8 @@ class RefineRun {
   bool derive_pixels(Renderer& renderer, const std::vector<Pose>& poses, double margin);
   cv::Mat derived_pixels(Renderer& renderer, const std::vector<Pose>& poses, double margin);  // empty: none
   void use_pixels(const cv::Mat& pixels);  // as the mask, at both scales
+  /// A tracked start's pixels from depth: derived once (set_tracked_start()).
+  bool derives_once() const { return tracked_start_ && !pixels_from_colour_; }
   double diameter_ = 1.0;
   RefineResult res_;
   std::vector<Pose> poses_, best_pose_;
@@ -178,6 +184,7 @@ class RefineRun {
   int polish_iterations_ = 0;
   int newton_rounds_ = 0;
   bool tracked_start_ = false;
+  std::optional<MeasuredCurvature> carried_curvature_;
   long evaluations_ = 0;          // hypothesis evaluations (and plain renders) so far, every view
   /// The last descent (RefinerOptions::polish_iterations) from res.pose, keeping the lowest loss seen.
   void polish(Renderer& renderer, RefineResult& res);

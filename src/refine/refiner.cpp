@@ -449,6 +449,7 @@ std::vector<RefineResult> Refiner::refine_pass(const RefinerOptions& options, co
       runs[k]->set_polish(fresh ? options.polish_iterations : 0);
       runs[k]->set_newton(options.newton_rounds);
       runs[k]->set_tracked_start(!fresh);
+      if (!fresh) runs[k]->set_carried_curvature(t.carried_curvature);
     } catch (const std::exception& e) {
       out[k] = failed_result(t.initial, e.what());
     }

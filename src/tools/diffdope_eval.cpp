@@ -196,7 +196,7 @@ int main(int argc, char** argv) {
       method = v;
     } else if (a == "--track-budget") {
       const size_t comma = v.find(',');
-      if (comma == std::string::npos) throw std::invalid_argument("--track-budget: expected B,I (e.g. 8,20)");
+      if (comma == std::string::npos) throw std::invalid_argument("--track-budget: expected B,I (e.g. 4,10)");
       track_budget.emplace();
       track_budget->batch_size = int(parse_integer_arg(a + " B", v.substr(0, comma), 0, RefinerOptions::kMaxBatchSize));
       track_budget->iterations =

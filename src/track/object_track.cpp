@@ -117,6 +117,7 @@ bool ObjectTrack::report(const Pose& refined, bool plausible, double image_stamp
     }
     return false;
   }
+  curvature_.reset();  // (the next plausible frame measures its own)
   ++failures_;
   if (failures_ >= options_.max_failures && track_) {
     track_.reset();
@@ -126,7 +127,24 @@ bool ObjectTrack::report(const Pose& refined, bool plausible, double image_stamp
   return false;
 }
 
+void ObjectTrack::note_curvature(const PoseCurvature& curvature, bool carried, const Pose& reported) {
+  if (!curvature.valid) {
+    curvature_.reset();
+  } else if (!carried) {
+    curvature_ = MeasuredCurvature{curvature, reported};
+    curvature_frames_ = 1;
+  } else {
+    ++curvature_frames_;
+  }
+}
+
+std::optional<MeasuredCurvature> ObjectTrack::carried_curvature() const {
+  if (!track_ || !curvature_ || curvature_frames_ >= options_.covariance_frames) return std::nullopt;
+  return curvature_;
+}
+
 void ObjectTrack::reset() {
+  curvature_.reset();
   detection_.reset();
   track_.reset();
   previous_.reset();
@@ -181,6 +199,8 @@ const std::vector<OptionSpec<TrackOptions>>& track_option_table() {
                  "runs per refinement when every object starts from a steady track"),
       option_row("track_iterations", &T::iterations, 0, RefinerOptions::kMaxIterations, " (0: the refiner's)",
                  "iterations per refinement when every object starts from a steady track"),
+      option_row("covariance_frames", &T::covariance_frames, 1, 1000, " frames",
+                 "frames of a steady track one probe of the covariance serves (1: probed on every frame)"),
   };
   return rows;
 }

@@ -63,13 +63,13 @@ TEST_P(DevReal, NoEasyOrTrackedStartEndsFar) {
 INSTANTIATE_TEST_SUITE_P(MaskModes, DevReal, ::testing::Values("given", "none", "box"),
                          [](const auto& info) { return std::string(info.param); });
 
-// The node's budget for a steady track (TrackOptions: 8 runs of 20 iterations, no scan, retry or polish, the
+// The node's budget for a steady track (TrackOptions: 4 runs of 10 iterations, no scan, retry or polish, the
 // object's pixels derived once before the descent) on the real motion between frames, without a mask.
 TEST(DevRealTracking, AStartFromThePreviousFrameOnTheTrackBudgetStaysNear) {
   if (!fs::is_directory(kDevReal / "test" / kScene))
     GTEST_SKIP() << kDevReal.string() << " is not here: the real frames are not checked";
   const std::vector<nlohmann::json> results =
-      evaluate_scene("--masks none --levels tracking --track-budget 8,20", "track_budget");
+      evaluate_scene("--masks none --levels tracking --track-budget 4,10", "track_budget");
   for (const nlohmann::json& r : results)
     EXPECT_LT(r["error_mm"].get<double>(), 10.0)
         << "obj " << r["obj_id"] << " from " << r["error_init_mm"] << " mm";

@@ -97,6 +97,46 @@ TEST(NewtonSteps, GrowTheirReachAlongAValleyThatGoesOn) {
   EXPECT_GT(1e3 * add_error(points, Refiner(o).refine(s.cam, s.obs, s.mesh, init).pose, s.truth), 0.9 * start_mm);
 }
 
+TEST(NewtonSteps, EndWhereTheModelPromisesLessThanAStepNeeds) {
+  // Starts a frame's motion from the truth (1 degree, 1 mm), steps alone: a round whose step ends where the
+  // quadratic model promises less than kNewtonEvidence is the last, without a probe about its result. Each round
+  // costs a probe and three tries, so rounds = (evaluations - the pixel count's render) / that.
+  const BarScene s{SyntheticNoise()};
+  RefinerOptions o = test::steps_only_options();
+  o.shape_tolerance = 0;
+  o.print_search = 0;
+  const auto points = metric_points(s.mesh);
+  int ended_by_promise = 0;
+  for (uint32_t seed = 1; seed <= 4; ++seed) {
+    std::mt19937_64 rng(seed);
+    const Pose init = perturb_pose(s.truth, s.mesh.center(), M_PI / 180, 0.001, rng);
+    const RefineResult r = Refiner(o).refine(s.cam, s.obs, s.mesh, init);
+    const long steps = r.stage_evaluations[size_t(RefineStage::kAlignPrintAndStep)];
+    ASSERT_EQ((steps - 1) % (kSecantProbePoses + 3), 0) << steps;
+    const long rounds = (steps - 1) / (kSecantProbePoses + 3);
+    EXPECT_GE(r.newton_steps, 1) << "seed " << seed;
+    ended_by_promise += rounds == r.newton_steps;
+    EXPECT_LT(1e3 * add_error(points, r.pose, s.truth), 0.25) << "seed " << seed << " from " << 1e3 * add_error(points, init, s.truth) << " mm";
+  }
+  EXPECT_GT(ended_by_promise, 0) << "every refinement probed once more after its last step";
+}
+
+TEST(NewtonDecrease, IsTheQuadraticModelsDropAtItsMinimum) {
+  Vector6d curvatures;
+  curvatures << 4, 1, 0.25, 9, 2, 0.5;
+  const Matrix6d U = Eigen::HouseholderQR<Matrix6d>(Matrix6d::Random()).householderQ();
+  const Matrix6d H = U * curvatures.asDiagonal() * U.transpose();
+  Vector6d g;
+  g << 0.3, -0.2, 0.1, 0.05, -0.4, 0.2;
+  EXPECT_NEAR(newton_decrease(H, g), 0.5 * g.dot(H.ldlt().solve(g)), 1e-12);
+  // Along a declared symmetry's free direction nothing is promised.
+  EXPECT_NEAR(newton_decrease(H, U.col(2), {U.col(2)}), 0, 1e-12);
+  EXPECT_NEAR(newton_decrease(H, U.col(2)), 0.5 / curvatures[2], 1e-12);
+  // No step (nowhere curved upwards, or not finite): nothing.
+  EXPECT_EQ(newton_decrease(-H, g), 0);
+  EXPECT_EQ(newton_decrease(H, Vector6d::Constant(std::nan(""))), 0);
+}
+
 TEST(NewtonStep, SolvesAQuadraticModelWithinItsTrustRadius) {
   Vector6d curvatures;
   curvatures << 4, 1, 0.25, 9, 2, 0.5;

@@ -401,10 +401,10 @@ TEST(ObjectTrack, LiveTracksGetTheTrackingBudget) {
   EXPECT_EQ(tracked_options(o, t).iterations, 60);
   // A cap: a refiner already cheaper than the tracking budget stays as it is.
   t = TrackOptions();
-  o.batch_size = 6;
-  o.iterations = 12;
-  EXPECT_EQ(tracked_options(o, t).batch_size, 6);
-  EXPECT_EQ(tracked_options(o, t).iterations, 12);
+  o.batch_size = t.batch_size - 1;
+  o.iterations = t.iterations - 2;
+  EXPECT_EQ(tracked_options(o, t).batch_size, t.batch_size - 1);
+  EXPECT_EQ(tracked_options(o, t).iterations, t.iterations - 2);
 }
 
 TEST(ObjectTrack, ATrackIsSteadyWhenRefinedTwiceAndNotStalled) {
@@ -439,4 +439,45 @@ TEST(ObjectTrack, ADetectorsBoxIsTheObjectsBoxProjectedAtTheDetection) {
   const Pose aside(Eigen::Matrix3d::Identity(), Eigen::Vector3d(0.38, 0, 1.0) - cube.center());
   const cv::Rect clipped = detector_box(cam, cube, {Seed{aside, SeedSource::kDetector}});
   EXPECT_EQ(clipped.x + clipped.width, 320);  // within the image
+}
+
+TEST(ObjectTrack, AMeasuredCurvatureServesCovarianceFramesThenIsProbedAgain) {
+  TrackOptions o = options();
+  o.covariance_frames = 3;
+  ObjectTrack t(o);
+  PoseCurvature measured;
+  measured.valid = true;
+  measured.hessian = 2 * Matrix6d::Identity();
+  const auto frame = [&](double stamp, const PoseCurvature& c, bool carried) {
+    EXPECT_FALSE(t.report(at(stamp - 10.0), true, stamp));
+    t.note_curvature(c, carried, at(stamp - 10.0));
+  };
+  EXPECT_FALSE(t.carried_curvature());  // nothing measured yet
+  t.add_detection(at(0.1), 10.0);
+  frame(10.0, measured, false);
+  ASSERT_TRUE(t.carried_curvature());
+  EXPECT_EQ(t.carried_curvature()->curvature.hessian, measured.hessian);
+  EXPECT_EQ(t.carried_curvature()->pose.t, at(0.0).t);  // the pose it was measured at
+  frame(10.1, measured, true);  // the second frame it serves
+  EXPECT_TRUE(t.carried_curvature());
+  frame(10.2, measured, true);  // the third: the next frame probes again
+  EXPECT_FALSE(t.carried_curvature());
+  frame(10.3, measured, false);
+  EXPECT_NEAR(t.carried_curvature()->pose.t.x(), 0.3, 1e-9);
+  // An implausible frame, an invalid curvature or a reset drops it.
+  EXPECT_FALSE(t.report(at(0.2), false, 10.4));
+  EXPECT_FALSE(t.carried_curvature());
+  frame(10.5, measured, false);
+  frame(10.6, PoseCurvature(), false);
+  EXPECT_FALSE(t.carried_curvature());
+  frame(10.7, measured, false);
+  t.reset();
+  EXPECT_FALSE(t.carried_curvature());
+  // covariance_frames 1: probed on every frame.
+  o.covariance_frames = 1;
+  ObjectTrack every(o);
+  every.add_detection(at(0.1), 10.0);
+  EXPECT_FALSE(every.report(at(0.1), true, 10.0));
+  every.note_curvature(measured, false, at(0.1));
+  EXPECT_FALSE(every.carried_curvature());
 }

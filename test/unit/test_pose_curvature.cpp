@@ -2,6 +2,7 @@
 // from it.
 #include <gtest/gtest.h>
 
+#include <Eigen/Cholesky>
 #include <Eigen/Geometry>
 #include <cmath>
 
@@ -159,4 +160,81 @@ TEST(PoseCurvature, ViewsOfOnePoseWeighTheirMeanLoss) {
   ASSERT_TRUE(both.valid);
   EXPECT_NEAR(both.loss, 0.5 * (one.loss + only_b.loss), 1e-9);
   EXPECT_LT((both.hessian - 0.5 * (one.hessian + only_b.hessian)).norm(), 0.1 * both.hessian.norm());
+}
+
+TEST(PoseCurvature, CarriedToALaterFramesPoseItTurnsWithTheObject) {
+  // A printed bar (20 x 3 x 2 cm) turned a quarter turn about the line of sight through its centre (and moved
+  // 5 mm) between two frames: its image turns with it, and so do the directions the loss pins down least and
+  // most. The curvature measured on the first frame, carried to the second pose, is near the second frame's own
+  // probe; carried without the turn, it is far. The loss and the weakest direction's rise are the second frame's.
+  // (Secant Hessians of one scene vary with the pose itself, so the carried one is only near: the test measures
+  // the turn.)
+  const Camera cam{420, 420, 159.5, 119.5, 320, 240};
+  const Mesh bar = make_box(Eigen::Vector3d(0.20, 0.03, 0.02), make_label_texture(256, 5));
+  const Pose first(Eigen::AngleAxisd(0.3, Eigen::Vector3d::UnitX()).toRotationMatrix(), Eigen::Vector3d(0.0, 0.01, 0.6));
+  const Eigen::Vector3d pivot = first * bar.center();
+  Vector6d motion = Vector6d::Zero();
+  motion.head<3>() = Eigen::Vector3d(0.005, 0, 0);
+  motion.tail<3>() = pivot.normalized() * (M_PI / 2);
+  const Pose second = twist_about(first, motion, pivot);
+  auto renderer = make_cpu_renderer();
+  const Observation a = synthesize_observation(*renderer, cam, bar, first, SyntheticNoise(), 1);
+  const Observation b = synthesize_observation(*renderer, cam, bar, second, SyntheticNoise(), 2);
+  const PoseCurvature measured = probe_pose_curvature(*renderer, cam, bar, a, LossOptions(), first, 0.01);
+  const PoseCurvature fresh = probe_pose_curvature(*renderer, cam, bar, b, LossOptions(), second, 0.01);
+  ASSERT_TRUE(measured.valid);
+  ASSERT_TRUE(fresh.valid);
+  const PoseCurvature carried =
+      carry_pose_curvature(*renderer, {{cam, bar, b}}, LossOptions(), measured, first, second, bar.center(), 0.01);
+  const PoseCurvature unturned =
+      carry_pose_curvature(*renderer, {{cam, bar, b}}, LossOptions(), measured, second, second, bar.center(), 0.01);
+  ASSERT_TRUE(carried.valid);
+  EXPECT_NEAR(carried.loss, fresh.loss, 1e-9 * fresh.loss);
+  EXPECT_EQ(carried.metric, fresh.metric);
+  EXPECT_GT(carried.weakest_rise, 0);
+  // Compared in the metric's units (metres of mean surface displacement in every direction, so that turns and
+  // shifts weigh alike): the Hessians' relative difference.
+  const Matrix6d Linv = Eigen::LLT<Matrix6d>(fresh.metric).matrixL().toDenseMatrix().inverse();
+  const auto off = [&](const PoseCurvature& c) {
+    return (Linv * (c.hessian - fresh.hessian) * Linv.transpose()).norm() /
+           (Linv * fresh.hessian * Linv.transpose()).norm();
+  };
+  EXPECT_LT(off(carried), 0.5);
+  EXPECT_GT(off(unturned), 4 * off(carried));
+  // Nothing measured, nothing carried.
+  EXPECT_FALSE(carry_pose_curvature(*renderer, {{cam, bar, b}}, LossOptions(), PoseCurvature(), first, second,
+                                    bar.center(), 0.01)
+                   .valid);
+}
+
+TEST(PoseCurvature, ATrackedStartCarriesTheCurvatureItIsGivenAndAFreshOneProbes) {
+  const Camera cam{420, 420, 159.5, 119.5, 320, 240};
+  const Mesh block = make_l_block(0.12, make_label_texture(128, 3));
+  Vector6d d;
+  d << 0, 0, 0, 0.5, -0.3, 0.2;
+  const Pose truth(se3_exp(d).R, Eigen::Vector3d(0.0, 0.01, 0.6));
+  auto renderer = make_cpu_renderer();
+  const Observation obs = synthesize_observation(*renderer, cam, block, truth, SyntheticNoise(), 1);
+  RefinerOptions o;
+  o.batch_size = 4;
+  o.iterations = 10;
+  Refiner refiner(o);
+  ObjectTarget t;
+  t.mesh = &block;
+  t.initial = truth;
+  t.start_kind = StartKind::kTracked;
+  const RefineResult probed = refiner.refine_all(cam, obs, {t}).front();
+  ASSERT_TRUE(probed.curvature.valid);
+  EXPECT_FALSE(probed.curvature_carried);
+  t.carried_curvature = MeasuredCurvature{probed.curvature, probed.pose};
+  const RefineResult carried = refiner.refine_all(cam, obs, {t}).front();
+  EXPECT_TRUE(carried.curvature_carried);
+  ASSERT_TRUE(carried.curvature.valid);
+  EXPECT_FALSE(carried.covariance.isZero(0));
+  // 3 evaluations instead of the probe's 15 (the scores' render is the stage's other one).
+  EXPECT_EQ(carried.stage_evaluations[size_t(RefineStage::kScore)], 1 + kCarriedCurvatureEvaluations);
+  EXPECT_EQ(probed.stage_evaluations[size_t(RefineStage::kScore)], 1 + kCurvatureProbeEvaluations);
+  // A fresh start (a detection) is not a frame from the last: it probes its own.
+  t.start_kind = StartKind::kFresh;
+  EXPECT_FALSE(refiner.refine_all(cam, obs, {t}).front().curvature_carried);
 }

@@ -85,6 +85,7 @@ std::vector<diffdope_ros::RefinedPose> Worker::publishResults(
     // No spin / flip of a symmetric object between frames.
     const diffdope::Pose refined = s.tracks->track(k).reported_pose(r.pose, s.mesh->symmetry);
     if (s.tracks->report(k, refined, r.plausible, frame.header.stamp.toSec())) reportLostTrack(s, k);
+    s.tracks->note_curvature(k, r.curvature, r.curvature_carried, refined);
     implausible += verdict == diffdope::VerdictState::kImplausible;
     diffdope_ros::RefinedPose p = message(seed, refined);
     out.push_back(p);

@@ -42,6 +42,7 @@ std::vector<diffdope_ros::RefinedPose> Worker::refineAndPublish(const Frame& fra
     t.initial = starts.front().pose;
     for (size_t j = 1; j < starts.size(); ++j) t.alternatives.push_back(starts[j].pose);
     t.start_kind = diffdope::start_kind(starts);  // (shape scan, retry: not from a live track)
+    if (t.start_kind == diffdope::StartKind::kTracked) t.carried_curvature = s.tracks->track(k).carried_curvature();
     if (settings_.mask_source == MaskSource::kBox) t.box = diffdope::detector_box(frame.camera, *s.mesh, starts);
     if (!frame.labels.empty()) {
       t.mask = instance_masks[i][used_masks[i]++];
