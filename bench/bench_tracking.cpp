@@ -150,7 +150,7 @@ int main(int argc, char** argv) {
       std::vector<ObjectTarget> targets;
       std::vector<size_t> target_object;
       std::vector<std::vector<Seed>> target_starts;
-      bool all_steady = true;
+      std::vector<bool> steady;
       for (size_t i = 0; i < objects.size(); ++i) {
         std::vector<Seed> starts = tracks[i].seeds_for(stamp);
         if (starts.empty()) continue;
@@ -161,15 +161,15 @@ int main(int argc, char** argv) {
         t.start_kind = start_kind(starts);
         if (t.start_kind == StartKind::kTracked) t.carried_curvature = tracks[i].carried_curvature();
         if (args.masks) t.mask = scene.visible_masks[i];
-        all_steady = all_steady && t.start_kind == StartKind::kTracked && tracks[i].steady(stamp);
+        steady.push_back(t.start_kind == StartKind::kTracked && tracks[i].steady(stamp));
+        if (steady.back()) t.budget = tracked_budget(track_options);
         targets.push_back(t);
         target_object.push_back(i);
         target_starts.push_back(starts);
       }
       if (targets.empty()) continue;
-      const RefinerOptions used = all_steady ? tracked_options(options, track_options) : options;
       const auto t0 = std::chrono::steady_clock::now();
-      const std::vector<RefineResult> results = refiner.refine_all(cam, frame, targets, used);
+      const std::vector<RefineResult> results = refiner.refine_all(cam, frame, targets, options);
       frame_ms.push_back(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());
       for (size_t n = 0; n < results.size(); ++n) {
         const size_t i = target_object[n];
@@ -188,7 +188,7 @@ int main(int argc, char** argv) {
                       rotation_deg(targets[n].initial, truth[i]),
                       1e3 * (targets[n].initial * objects[i].mesh.center() - truth[i] * objects[i].mesh.center()).norm(),
                       rot, about_z, centre, 1e3 * add_error(points[i], reported, truth[i]), results[n].print_turn * 180 / M_PI, results[n].newton_steps, results[n].plausible ? "" : "  implausible",
-                      all_steady ? "  (track budget)" : "");
+                      steady[n] ? "  (track budget)" : "");
       }
     }
     std::sort(frame_ms.begin(), frame_ms.end());

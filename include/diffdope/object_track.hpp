@@ -60,9 +60,11 @@ StartKind start_kind(const std::vector<Seed>& starts);
 cv::Rect detector_box(const Camera& camera, const Mesh& mesh, const std::vector<Seed>& starts);
 
 
-/// The refiner options for a frame whose targets all start from steady tracks (each start_kind() kTracked and
-/// ObjectTrack::steady()): `o` with its batch_size and iterations capped at TrackOptions' (where those are set),
-/// no polish, and at most kTrackedNewtonRounds Newton rounds.
+/// The budget of an object that starts from a steady track (start_kind() kTracked and ObjectTrack::steady()):
+/// runs and iterations capped at TrackOptions' (where those are set), no polish, and at most kTrackedNewtonRounds
+/// Newton rounds (ObjectTarget::budget).
+RefineBudget tracked_budget(const TrackOptions& t);
+/// The refiner options for a frame whose targets all start from steady tracks: with_budget(o, tracked_budget(t)).
 RefinerOptions tracked_options(const RefinerOptions& o, const TrackOptions& t);
 
 class ObjectTrack {

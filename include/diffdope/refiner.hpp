@@ -328,6 +328,17 @@ bool retry_replaces(const RefineResult& first, const RefineResult& retry, bool w
 /// right or nearly so; a scan could only flip it between frames on a weakly printed object.
 enum class StartKind { kFresh, kTracked };
 
+/// A smaller budget for one object of a Refiner::refine_all() call than the call's options give (a steady track's:
+/// tracked_budget() in object_track.hpp): each a cap on the option of that name, never a raise.
+struct RefineBudget {
+  int batch_size = std::numeric_limits<int>::max();
+  int iterations = std::numeric_limits<int>::max();
+  int polish_iterations = std::numeric_limits<int>::max();
+  int newton_rounds = std::numeric_limits<int>::max();
+};
+/// `o` within `budget` (validated: a budget can make options invalid, e.g. a batch of 0).
+RefinerOptions with_budget(const RefinerOptions& o, const RefineBudget& budget);
+
 /// One object of a frame for Refiner::refine_all().
 struct ObjectTarget {
   const Mesh* mesh = nullptr;
@@ -339,6 +350,9 @@ struct ObjectTarget {
   /// A tracked start (start_kind kTracked) only: the curvature an earlier frame of the track measured
   /// (ObjectTrack::carried_curvature()), carried to the result (carry_pose_curvature()) instead of probed again.
   std::optional<MeasuredCurvature> carried_curvature;
+  /// This object's budget when smaller than the call's (a steady track among fresh detections: each object costs
+  /// what its own start needs, in the same pass); none: the call's options.
+  std::optional<RefineBudget> budget;
 };
 
 class RefineRun;  // (src/refine/refine_run.hpp)

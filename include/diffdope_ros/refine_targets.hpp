@@ -25,11 +25,11 @@ struct TargetSeeds {
   size_t object;
   int instance;
   std::vector<diffdope::Seed> starts;
+  bool steady = false;  // a streamed frame's start from a steady track: the tracking budget will do
 };
 
 struct StreamingTargets {
   std::vector<TargetSeeds> seeds;
-  bool all_steady = true;  // every target starts from a steady track: the tracking budget will do
 };
 /// A streamed frame at `stamp`: every instance with a start (detection, track or prediction). Uses up the
 /// detections it takes.

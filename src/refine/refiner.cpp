@@ -95,6 +95,16 @@ RefineResult keep_better(RefineResult first, RefineResult retry, double time_ms,
 
 }  // namespace
 
+RefinerOptions with_budget(const RefinerOptions& o, const RefineBudget& budget) {
+  RefinerOptions out = o;
+  out.batch_size = std::min(o.batch_size, budget.batch_size);
+  out.iterations = std::min(o.iterations, budget.iterations);
+  out.polish_iterations = std::min(o.polish_iterations, budget.polish_iterations);
+  out.newton_rounds = std::min(o.newton_rounds, budget.newton_rounds);
+  out.validate();
+  return out;
+}
+
 std::vector<std::string> used_terms(const LossOptions& l) {
   std::vector<std::string> out;
   for (const auto& [name, weight] : {std::pair<const char*, double>{"rgb", l.weight_rgb}, {"depth", l.weight_depth},
@@ -435,19 +445,22 @@ std::vector<RefineResult> Refiner::refine_pass(const RefinerOptions& options, co
   const SharedImages shared{fine_frame ? &*fine_frame : nullptr, coarse_frame ? &*coarse_frame : nullptr};
   std::vector<RefineResult> out(objects.size());
   std::vector<std::unique_ptr<RefineRun>> runs(objects.size());
+  std::vector<RefinerOptions> object_options(objects.size(), options);  // (each run holds its own by reference)
   for (size_t k = 0; k < objects.size(); ++k) {
     const ObjectTarget& t = objects[k];
     try {
       if (!t.mesh) throw std::invalid_argument("no mesh");
+      if (t.budget) object_options[k] = with_budget(options, *t.budget);
+      const RefinerOptions& o_k = object_options[k];
       const Observation o =
           frame.with_mask(t.mask.empty() || t.mask.type() == CV_32FC1 ? t.mask : to_mask_float(t.mask), t.box);
-      runs[k] = std::make_unique<RefineRun>(options, camera, o, *t.mesh, starts_of(t),
-                                            shape_turns(options, *t.mesh, t.start_kind), shared.fine, shared.coarse);
+      runs[k] = std::make_unique<RefineRun>(o_k, camera, o, *t.mesh, starts_of(t),
+                                            shape_turns(o_k, *t.mesh, t.start_kind), shared.fine, shared.coarse);
       const bool fresh = t.start_kind == StartKind::kFresh;
-      runs[k]->set_print_axes(print_axes(options, *t.mesh), fresh ? options.print_search
-                                                                  : std::min(options.print_search, kTrackedPrintSearch));
-      runs[k]->set_polish(fresh ? options.polish_iterations : 0);
-      runs[k]->set_newton(options.newton_rounds);
+      runs[k]->set_print_axes(print_axes(o_k, *t.mesh),
+                              fresh ? o_k.print_search : std::min(o_k.print_search, kTrackedPrintSearch));
+      runs[k]->set_polish(fresh ? o_k.polish_iterations : 0);
+      runs[k]->set_newton(o_k.newton_rounds);
       runs[k]->set_tracked_start(!fresh);
       if (!fresh) runs[k]->set_carried_curvature(t.carried_curvature);
     } catch (const std::exception& e) {

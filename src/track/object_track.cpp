@@ -171,18 +171,21 @@ cv::Rect detector_box(const Camera& camera, const Mesh& mesh, const std::vector<
   return cv::Rect();
 }
 
-RefinerOptions tracked_options(const RefinerOptions& o, const TrackOptions& t) {
-  RefinerOptions out = o;
+RefineBudget tracked_budget(const TrackOptions& t) {
+  RefineBudget b;
   // A cap, never a raise: a user who lowers the refiner's own budget lowers the tracked one with it.
-  if (t.batch_size > 0) out.batch_size = std::min(o.batch_size, t.batch_size);
-  if (t.iterations > 0) out.iterations = std::min(o.iterations, t.iterations);
+  if (t.batch_size > 0) b.batch_size = t.batch_size;
+  if (t.iterations > 0) b.iterations = t.iterations;
   // A tracked start is not polished (Refiner::refine_all): not in its time budget. It keeps the Newton steps,
   // which converge what its few iterations leave short (the roll of an elongated object: bench_tracking), at
   // most kTrackedNewtonRounds of them.
-  out.polish_iterations = 0;
-  out.newton_rounds = std::min(o.newton_rounds, kTrackedNewtonRounds);
-  out.validate();
-  return out;
+  b.polish_iterations = 0;
+  b.newton_rounds = kTrackedNewtonRounds;
+  return b;
+}
+
+RefinerOptions tracked_options(const RefinerOptions& o, const TrackOptions& t) {
+  return with_budget(o, tracked_budget(t));
 }
 
 const std::vector<OptionSpec<TrackOptions>>& track_option_table() {

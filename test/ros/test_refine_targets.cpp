@@ -38,8 +38,25 @@ TEST(RefineTargets, StreamingTakesEveryDetectionOnce) {
   EXPECT_EQ(first.seeds[0].object, 0u);
   EXPECT_EQ(first.seeds[1].object, 1u);
   EXPECT_EQ(first.seeds[2].instance, 1);
-  EXPECT_FALSE(first.all_steady);  // from detections, not from steady tracks
+  for (const TargetSeeds& s : first.seeds) EXPECT_FALSE(s.steady);  // from detections, not from steady tracks
   EXPECT_TRUE(streaming_targets(scene.objects, 10.1).seeds.empty());  // used up, and nothing refined yet
+}
+
+TEST(RefineTargets, EachSeedSaysWhetherItStartsFromASteadyTrack) {
+  // The box refined on two frames in a row starts the third from a steady track (the tracking budget); a twin with
+  // a fresh detection on that frame does not, and the box keeps its budget beside it.
+  Scene scene;
+  scene.box->add_detections({at(0)}, 10.0);
+  ASSERT_EQ(streaming_targets(scene.objects, 10.0).seeds.size(), 1u);
+  EXPECT_FALSE(scene.box->report(0, at(0), true, 10.0));
+  EXPECT_FALSE(scene.box->report(0, at(0.001), true, 10.033));
+  scene.twins->add_detections({at(0.5)}, 10.066);
+  const StreamingTargets third = streaming_targets(scene.objects, 10.066);
+  ASSERT_EQ(third.seeds.size(), 2u);
+  EXPECT_EQ(third.seeds[0].object, 0u);
+  EXPECT_TRUE(third.seeds[0].steady);
+  EXPECT_EQ(third.seeds[1].object, 1u);
+  EXPECT_FALSE(third.seeds[1].steady);
 }
 
 TEST(RefineTargets, RequestNamesAreCheckedFirst) {

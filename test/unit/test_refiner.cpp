@@ -445,6 +445,56 @@ TEST(Refiner, RefinesEveryObjectOfAFrameAndReportsBadOnes) {
   }
 }
 
+TEST(Refiner, EachObjectOfAFrameMayHaveItsOwnSmallerBudget) {
+  // A box on a steady track (ObjectTarget::budget) beside a can from a detection, in one pass: the box gets its
+  // budget, the can the call's options, and each result is what it gets refined alone with those options.
+  const Camera cam(420, 420, 159.5, 119.5, 320, 240);
+  const Mesh box = make_box(Eigen::Vector3d(0.08, 0.05, 0.1), make_label_texture(256, 41));
+  const Mesh can = make_cylinder(0.03, 0.09, 32, make_label_texture(256, 42));
+  Vector6d d;
+  d << 0, 0, 0, 0.4, 0.3, 0.2;
+  const Pose box_truth(se3_exp(d).R, Eigen::Vector3d(-0.07, 0.0, 0.6));
+  const Pose can_truth(se3_exp(-d).R, Eigen::Vector3d(0.07, 0.01, 0.55));
+  auto r = make_cpu_renderer();
+  const SyntheticScene scene =
+      synthesize_scene(*r, cam, {SceneObject{&box, box_truth}, SceneObject{&can, can_truth}}, SyntheticNoise(), 9);
+  Observation frame;
+  frame.rgb = scene.rgb;
+  frame.depth = scene.depth;
+  std::mt19937_64 rng(9);
+  std::vector<ObjectTarget> objects(2);
+  objects[0].mesh = &box;
+  objects[0].initial = perturb_pose(box_truth, box.center(), M_PI / 180, 0.001, rng);
+  objects[0].mask = scene.visible_masks[0];
+  objects[0].start_kind = StartKind::kTracked;
+  RefineBudget budget;
+  budget.batch_size = 2;
+  budget.iterations = 6;
+  objects[0].budget = budget;
+  objects[1].mesh = &can;
+  objects[1].initial = perturb_pose(can_truth, can.center(), 10 * M_PI / 180, 0.01, rng);
+  objects[1].mask = scene.visible_masks[1];
+  const RefinerOptions o = test_options();
+  const auto res = Refiner(o).refine_all(cam, frame, objects);
+  ASSERT_EQ(res.size(), 2u);
+  EXPECT_EQ(res[0].iterations, 6);
+  EXPECT_EQ(res[0].run_losses.size(), 2u);
+  EXPECT_EQ(res[1].iterations, o.iterations);
+  for (size_t k = 0; k < 2; ++k) {
+    ObjectTarget alone = objects[k];
+    alone.budget.reset();
+    const RefinerOptions own = objects[k].budget ? with_budget(o, *objects[k].budget) : o;
+    const RefineResult single = Refiner(o).refine_all(cam, frame, {alone}, own).front();
+    EXPECT_EQ(res[k].pose.matrix(), single.pose.matrix()) << "object " << k;
+    EXPECT_EQ(res[k].loss.total, single.loss.total) << "object " << k;
+  }
+  // A budget is a cap: larger than the call's options, it changes nothing.
+  EXPECT_EQ(with_budget(o, RefineBudget()).iterations, o.iterations);
+  RefineBudget none;
+  none.batch_size = 0;
+  EXPECT_THROW(with_budget(o, none), std::invalid_argument);
+}
+
 TEST(RefinerOptions, YamlOverridesAndRejectsTypos) {
   const RefinerOptions o = RefinerOptions::from_yaml_string(
       "batch_size: 8\niterations: 50\nlr_log_uniform: true\nloss: {weight_rgb: 0, depth_truncation: 0.02}\n"

@@ -34,7 +34,7 @@ std::vector<diffdope_ros::RefinedPose> Worker::refineAndPublish(const Frame& fra
   }
   std::map<size_t, size_t> used_masks;  // per object: how many of its split masks are taken
   for (size_t n = 0; n < seeds.size(); ++n) {
-    const auto& [i, k, starts] = seeds[n];
+    const auto& [i, k, starts, steady] = seeds[n];
     Slot& s = *slots_[i];
     const Instance& in = s.instances[size_t(k)];
     diffdope::ObjectTarget t;
@@ -43,6 +43,7 @@ std::vector<diffdope_ros::RefinedPose> Worker::refineAndPublish(const Frame& fra
     for (size_t j = 1; j < starts.size(); ++j) t.alternatives.push_back(starts[j].pose);
     t.start_kind = diffdope::start_kind(starts);  // (shape scan, retry: not from a live track)
     if (t.start_kind == diffdope::StartKind::kTracked) t.carried_curvature = s.tracks->track(k).carried_curvature();
+    if (steady) t.budget = diffdope::tracked_budget(options_.track);
     if (settings_.mask_source == MaskSource::kBox) t.box = diffdope::detector_box(frame.camera, *s.mesh, starts);
     if (!frame.labels.empty()) {
       t.mask = instance_masks[i][used_masks[i]++];

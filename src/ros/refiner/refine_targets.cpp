@@ -27,9 +27,9 @@ StreamingTargets streaming_targets(const std::vector<TargetObject>& objects, dou
       auto starts = objects[i].tracks->track(k).seeds_for(stamp);
       if (!starts.empty()) out.seeds.push_back({i, k, std::move(starts)});
     }
-  for (const auto& s : out.seeds)
-    out.all_steady = out.all_steady && diffdope::start_kind(s.starts) == diffdope::StartKind::kTracked &&
-                     objects[s.object].tracks->track(s.instance).steady(stamp);
+  for (auto& s : out.seeds)
+    s.steady = diffdope::start_kind(s.starts) == diffdope::StartKind::kTracked &&
+               objects[s.object].tracks->track(s.instance).steady(stamp);
   return out;
 }
 

@@ -148,13 +148,9 @@ void Worker::processStreaming(const std::shared_ptr<const Frame>& frame) {
   absorbDetections(*frame);
   const double stamp = frame->header.stamp.toSec();
   const StreamingTargets targets = streaming_targets(targetObjects(), stamp);
-  // Every object on a steady track: the tracking budget (~track_batch_size x ~track_iterations). (What was
-  // skipped is logged; only a ~refine call's reply lists it too.)
-  if (!targets.seeds.empty())
-    refineAndPublish(*frame, targets.seeds,
-                     targets.all_steady ? diffdope::tracked_options(options_.refiner, options_.track)
-                                        : options_.refiner,
-                     nullptr);
+  // An object on a steady track gets the tracking budget (~track_batch_size x ~track_iterations), the others the
+  // full one, in the same pass. (What was skipped is logged; only a ~refine call's reply lists it too.)
+  if (!targets.seeds.empty()) refineAndPublish(*frame, targets.seeds, options_.refiner, nullptr);
   updateTrackingFlags(stamp);
 }
 
