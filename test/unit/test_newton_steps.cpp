@@ -121,13 +121,20 @@ TEST(NewtonSteps, EndWhereTheModelPromisesLessThanAStepNeeds) {
   EXPECT_GT(ended_by_promise, 0) << "every refinement probed once more after its last step";
 }
 
+/// A quadratic model: H = U diag(curvatures) Uᵀ (U a random rotation) and a gradient g.
+struct QuadraticModel {
+  Vector6d curvatures = (Vector6d() << 4, 1, 0.25, 9, 2, 0.5).finished();
+  Matrix6d U = Eigen::HouseholderQR<Matrix6d>(Matrix6d::Random()).householderQ();
+  Matrix6d H = U * curvatures.asDiagonal() * U.transpose();
+  Vector6d g = (Vector6d() << 0.3, -0.2, 0.1, 0.05, -0.4, 0.2).finished();
+};
+
 TEST(NewtonDecrease, IsTheQuadraticModelsDropAtItsMinimum) {
-  Vector6d curvatures;
-  curvatures << 4, 1, 0.25, 9, 2, 0.5;
-  const Matrix6d U = Eigen::HouseholderQR<Matrix6d>(Matrix6d::Random()).householderQ();
-  const Matrix6d H = U * curvatures.asDiagonal() * U.transpose();
-  Vector6d g;
-  g << 0.3, -0.2, 0.1, 0.05, -0.4, 0.2;
+  const QuadraticModel m;
+  const Matrix6d& H = m.H;
+  const Matrix6d& U = m.U;
+  const Vector6d& g = m.g;
+  const Vector6d& curvatures = m.curvatures;
   EXPECT_NEAR(newton_decrease(H, g), 0.5 * g.dot(H.ldlt().solve(g)), 1e-12);
   // Along a declared symmetry's free direction nothing is promised.
   EXPECT_NEAR(newton_decrease(H, U.col(2), {U.col(2)}), 0, 1e-12);
@@ -138,12 +145,11 @@ TEST(NewtonDecrease, IsTheQuadraticModelsDropAtItsMinimum) {
 }
 
 TEST(NewtonStep, SolvesAQuadraticModelWithinItsTrustRadius) {
-  Vector6d curvatures;
-  curvatures << 4, 1, 0.25, 9, 2, 0.5;
-  const Matrix6d U = Eigen::HouseholderQR<Matrix6d>(Matrix6d::Random()).householderQ();
-  const Matrix6d H = U * curvatures.asDiagonal() * U.transpose();
-  Vector6d g;
-  g << 0.3, -0.2, 0.1, 0.05, -0.4, 0.2;
+  const QuadraticModel m;
+  Vector6d curvatures = m.curvatures;
+  const Matrix6d& U = m.U;
+  const Matrix6d& H = m.H;
+  const Vector6d& g = m.g;
   const Vector6d exact = -H.ldlt().solve(g);
   EXPECT_LT((newton_step(H, g, 1e3) - exact).norm(), 1e-9 * exact.norm());
   // Beyond the trust radius: damped to it, -(H + λI)⁻¹ g for a λ > 0, which lowers the quadratic model more than

@@ -382,20 +382,33 @@ TEST(Refiner, ReportsUnusableInputInTheResult) {
   expect_error(nothing, s.truth, "rgb");
 }
 
-TEST(Refiner, RefinesEveryObjectOfAFrameAndReportsBadOnes) {
-  const Camera cam(420, 420, 159.5, 119.5, 320, 240);
-  const Mesh box = make_box(Eigen::Vector3d(0.08, 0.05, 0.1), make_label_texture(256, 41));
-  const Mesh can = make_cylinder(0.03, 0.09, 32, make_label_texture(256, 42));
-  Vector6d d;
-  d << 0, 0, 0, 0.4, 0.3, 0.2;
-  const Pose box_truth(se3_exp(d).R, Eigen::Vector3d(-0.07, 0.0, 0.6));
-  const Pose can_truth(se3_exp(-d).R, Eigen::Vector3d(0.07, 0.01, 0.55));
-  auto r = make_cpu_renderer();
-  const SyntheticScene scene =
-      synthesize_scene(*r, cam, {SceneObject{&box, box_truth}, SceneObject{&can, can_truth}}, SyntheticNoise(), 9);
+/// A printed box and can side by side, 55-60 cm from a 320 x 240 camera, in one frame (rgb and depth).
+struct BoxAndCan {
+  Camera cam{420, 420, 159.5, 119.5, 320, 240};
+  Mesh box = make_box(Eigen::Vector3d(0.08, 0.05, 0.1), make_label_texture(256, 41));
+  Mesh can = make_cylinder(0.03, 0.09, 32, make_label_texture(256, 42));
+  Pose box_truth, can_truth;
+  SyntheticScene scene;
   Observation frame;
-  frame.rgb = scene.rgb;
-  frame.depth = scene.depth;
+  BoxAndCan() {
+    Vector6d d;
+    d << 0, 0, 0, 0.4, 0.3, 0.2;
+    box_truth = Pose(se3_exp(d).R, Eigen::Vector3d(-0.07, 0.0, 0.6));
+    can_truth = Pose(se3_exp(-d).R, Eigen::Vector3d(0.07, 0.01, 0.55));
+    scene = synthesize_scene(*make_cpu_renderer(), cam, {SceneObject{&box, box_truth}, SceneObject{&can, can_truth}},
+                             SyntheticNoise(), 9);
+    frame.rgb = scene.rgb;
+    frame.depth = scene.depth;
+  }
+};
+
+TEST(Refiner, RefinesEveryObjectOfAFrameAndReportsBadOnes) {
+  const BoxAndCan s;
+  const Camera& cam = s.cam;
+  const Mesh &box = s.box, &can = s.can;
+  const Pose &box_truth = s.box_truth, &can_truth = s.can_truth;
+  const SyntheticScene& scene = s.scene;
+  const Observation& frame = s.frame;
   std::mt19937_64 rng(9);
   Pose nan_pose = box_truth;
   nan_pose.t.x() = std::nan("");
@@ -448,19 +461,12 @@ TEST(Refiner, RefinesEveryObjectOfAFrameAndReportsBadOnes) {
 TEST(Refiner, EachObjectOfAFrameMayHaveItsOwnSmallerBudget) {
   // A box on a steady track (ObjectTarget::budget) beside a can from a detection, in one pass: the box gets its
   // budget, the can the call's options, and each result is what it gets refined alone with those options.
-  const Camera cam(420, 420, 159.5, 119.5, 320, 240);
-  const Mesh box = make_box(Eigen::Vector3d(0.08, 0.05, 0.1), make_label_texture(256, 41));
-  const Mesh can = make_cylinder(0.03, 0.09, 32, make_label_texture(256, 42));
-  Vector6d d;
-  d << 0, 0, 0, 0.4, 0.3, 0.2;
-  const Pose box_truth(se3_exp(d).R, Eigen::Vector3d(-0.07, 0.0, 0.6));
-  const Pose can_truth(se3_exp(-d).R, Eigen::Vector3d(0.07, 0.01, 0.55));
-  auto r = make_cpu_renderer();
-  const SyntheticScene scene =
-      synthesize_scene(*r, cam, {SceneObject{&box, box_truth}, SceneObject{&can, can_truth}}, SyntheticNoise(), 9);
-  Observation frame;
-  frame.rgb = scene.rgb;
-  frame.depth = scene.depth;
+  const BoxAndCan s;
+  const Camera& cam = s.cam;
+  const Mesh &box = s.box, &can = s.can;
+  const Pose &box_truth = s.box_truth, &can_truth = s.can_truth;
+  const SyntheticScene& scene = s.scene;
+  const Observation& frame = s.frame;
   std::mt19937_64 rng(9);
   std::vector<ObjectTarget> objects(2);
   objects[0].mesh = &box;
