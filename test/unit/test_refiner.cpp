@@ -462,26 +462,21 @@ TEST(Refiner, EachObjectOfAFrameMayHaveItsOwnSmallerBudget) {
   // A box on a steady track (ObjectTarget::budget) beside a can from a detection, in one pass: the box gets its
   // budget, the can the call's options, and each result is what it gets refined alone with those options.
   const BoxAndCan s;
-  const Camera& cam = s.cam;
-  const Mesh &box = s.box, &can = s.can;
-  const Pose &box_truth = s.box_truth, &can_truth = s.can_truth;
-  const SyntheticScene& scene = s.scene;
-  const Observation& frame = s.frame;
   std::mt19937_64 rng(9);
   std::vector<ObjectTarget> objects(2);
-  objects[0].mesh = &box;
-  objects[0].initial = perturb_pose(box_truth, box.center(), M_PI / 180, 0.001, rng);
-  objects[0].mask = scene.visible_masks[0];
+  objects[0].mesh = &s.box;
+  objects[0].initial = perturb_pose(s.box_truth, s.box.center(), M_PI / 180, 0.001, rng);
+  objects[0].mask = s.scene.visible_masks[0];
   objects[0].start_kind = StartKind::kTracked;
   RefineBudget budget;
   budget.batch_size = 2;
   budget.iterations = 6;
   objects[0].budget = budget;
-  objects[1].mesh = &can;
-  objects[1].initial = perturb_pose(can_truth, can.center(), 10 * M_PI / 180, 0.01, rng);
-  objects[1].mask = scene.visible_masks[1];
+  objects[1].mesh = &s.can;
+  objects[1].initial = perturb_pose(s.can_truth, s.can.center(), 10 * M_PI / 180, 0.01, rng);
+  objects[1].mask = s.scene.visible_masks[1];
   const RefinerOptions o = test_options();
-  const auto res = Refiner(o).refine_all(cam, frame, objects);
+  const auto res = Refiner(o).refine_all(s.cam, s.frame, objects);
   ASSERT_EQ(res.size(), 2u);
   EXPECT_EQ(res[0].iterations, 6);
   EXPECT_EQ(res[0].run_losses.size(), 2u);
@@ -490,7 +485,7 @@ TEST(Refiner, EachObjectOfAFrameMayHaveItsOwnSmallerBudget) {
     ObjectTarget alone = objects[k];
     alone.budget.reset();
     const RefinerOptions own = objects[k].budget ? with_budget(o, *objects[k].budget) : o;
-    const RefineResult single = Refiner(o).refine_all(cam, frame, {alone}, own).front();
+    const RefineResult single = Refiner(o).refine_all(s.cam, s.frame, {alone}, own).front();
     EXPECT_EQ(res[k].pose.matrix(), single.pose.matrix()) << "object " << k;
     EXPECT_EQ(res[k].loss.total, single.loss.total) << "object " << k;
   }
