@@ -247,7 +247,7 @@ RefineRun::Candidate RefineRun::start_candidate() {
 
 void RefineRun::derive_pixels_at_result(Renderer& renderer, Candidate& c) {
   RefineResult& res = c.result;
-  if (!derives_pixels_ || derives_once() || !std::isfinite(res.loss.total) ||
+  if (!derives_pixels_ || !std::isfinite(res.loss.total) ||
       !derive_pixels(renderer, {res.pose}, options_.inlier_threshold))
     return;
   // The object's pixels about the chosen result, within what the verdict calls an inlier: the polish, the print

@@ -301,8 +301,7 @@ void RefineRun::update_object_pixels(Renderer& renderer) {
     ++derivations_;
     // A segmenter's mask is evidence: its outline is taken as given only where depth puts the object's edge
     // too. Otherwise the pixels derived from depth and colour replace it, as they stand in for a missing one.
-    const double margin = tracked_start_ ? options_.inlier_threshold : std::max(reach, options_.inlier_threshold);
-    const cv::Mat pixels = derived_pixels(renderer, initials_, margin);
+    const cv::Mat pixels = derived_pixels(renderer, initials_, std::max(reach, options_.inlier_threshold));
     const double offset = pixels.empty() ? NAN : outline_offset(fine_.front().obs.mask, pixels);
     if (!std::isnan(offset)) res_.given_mask_offset = offset;
     if (!pixels.empty()) {
@@ -324,12 +323,12 @@ void RefineRun::update_object_pixels(Renderer& renderer) {
     scan_loss_.weight_mask *= kDerivedMaskWeight;
     res_.loss_used.weight_mask *= kDerivedMaskWeight;
   } else if (derivations_ == 0) {
-    // A tracked start is a frame's motion from the truth: from depth its pixels are derived once, within what the
-    // verdict calls an inlier, and serve to the end (derives_once()). (From colour alone deriving once cost two of
-    // bench_tracking's three objects accuracy: it keeps all three.)
-    derivations_ = derives_once() ? 2 : 1;
-    const double margin = derives_once() ? options_.inlier_threshold : std::max(reach, options_.inlier_threshold);
-    if (derive_pixels(renderer, initials_, margin)) return;
+    // A tracked start is a frame's motion from the truth: from depth its pixels are derived before the descent
+    // already at the narrowed reach, and once more about the result (derives_twice()). (From colour alone that
+    // cost two of bench_tracking's three objects accuracy: it keeps all three derivations.)
+    derivations_ = derives_twice() ? 2 : 1;
+    const double margin = derives_twice() ? reach / 3 : reach;
+    if (derive_pixels(renderer, initials_, std::max(margin, options_.inlier_threshold))) return;
     // Nothing near the starts in depth (or no colour likely the object's): the window stays, and it is no
     // observation of the silhouette.
     derives_pixels_ = has_mask_ = false;

@@ -101,9 +101,10 @@ class RefineRun {
   void set_polish(int iterations) { polish_iterations_ = iterations; }
   /// Rounds of Newton steps after the print alignment (RefinerOptions::newton_rounds; 0: none).
   void set_newton(int rounds) { newton_rounds_ = rounds; }
-  /// A tracked start (StartKind::kTracked) is about a frame's motion from the truth: its object's pixels (without
-  /// a mask, or to check a given one) are derived from depth once, about the starts and within
-  /// RefinerOptions::inlier_threshold, where a fresh start's are narrowed to only about its result.
+  /// A tracked start (StartKind::kTracked) is about a frame's motion from the truth: without a mask its object's
+  /// pixels are derived from depth once before the descent, already within the reach the fresh start's second
+  /// derivation narrows to, and then only about the result (the verdict's pixels: about the starts, a track and
+  /// its prediction a few frames apart widen them).
   void set_tracked_start(bool tracked) { tracked_start_ = tracked; }
   /// The curvature an earlier frame measured (ObjectTarget::carried_curvature): carried to the result instead of
   /// probed (one view only).
@@ -162,8 +163,8 @@ class RefineRun {
   bool derive_pixels(Renderer& renderer, const std::vector<Pose>& poses, double margin);
   cv::Mat derived_pixels(Renderer& renderer, const std::vector<Pose>& poses, double margin);  // empty: none
   void use_pixels(const cv::Mat& pixels);  // as the mask, at both scales
-  /// A tracked start's pixels from depth: derived once (set_tracked_start()).
-  bool derives_once() const { return tracked_start_ && !pixels_from_colour_; }
+  /// A tracked start's pixels from depth: derived twice (set_tracked_start()).
+  bool derives_twice() const { return tracked_start_ && !pixels_from_colour_; }
   double diameter_ = 1.0;
   RefineResult res_;
   std::vector<Pose> poses_, best_pose_;

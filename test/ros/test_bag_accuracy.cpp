@@ -146,7 +146,10 @@ TEST(BagAccuracy, RefinedPosesTfAndScores) {
       EXPECT_GT(n, 0) << "no detector-seeded frame";
     }
     if (each_within) {
-      EXPECT_EQ(s.plausible, s.count);
+      std::string rejected;
+      for (const auto& row : rec.checker->rows())
+        if (row.name == o.name && !row.plausible) rejected += "\n  " + diffdope_ros::PoseChecker::formatRow(row);
+      EXPECT_EQ(s.plausible, s.count) << "called implausible:" << rejected;
     } else {
       // RGB alone leaves the distance along the viewing ray looser (a few millimetres), but the track must not
       // drift: every pose called plausible is within 2 cm and 5 degrees (and some are). The verdict may reject a
