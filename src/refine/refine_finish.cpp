@@ -474,9 +474,10 @@ void RefineRun::probe_curvature(Renderer& renderer, RefineResult& res) {
   if (!(distance > 0) || !std::isfinite(res.loss.total)) return;
   if (meshes_.size() == 1 && carried_curvature_) {
     const Mesh& mesh = *meshes_[0];
+    const std::vector<Vector6d> free = mesh.symmetry.free_twists(res.pose, res.pose * mesh.center());
     res.curvature = carry_pose_curvature(renderer, {{fine_[0].cam, mesh, fine_[0].obs}}, loss_,
                                          carried_curvature_->curvature, carried_curvature_->pose, res.pose,
-                                         mesh.center(), distance, mesh.symmetry.free_twists(res.pose, res.pose * mesh.center()));
+                                         mesh.center(), distance, free);
     res.curvature_carried = true;
     evaluations_ += kCarriedCurvatureEvaluations;
     return;
